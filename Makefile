@@ -1,0 +1,41 @@
+# pointreggpt — the commands a user runs. `make demo` and `make test` are the two in the README.
+SHELL := /bin/bash
+CARGO ?= cargo
+PYTHON ?= python3
+
+# Real depth sequences for the real-data tests (../shared/realdata beside the checkout, when present).
+POINTREGGPT_REAL_DATA ?= $(abspath $(wildcard ../shared/realdata))
+export POINTREGGPT_REAL_DATA
+
+.PHONY: all libtorch build demo test bench bench-deps clean-libtorch help
+
+all: build
+
+help:
+	@echo "make demo        run the main job on embedded synthetic scenes, write results to out/demo"
+	@echo "make test        run every test (release build; real-data tests use POINTREGGPT_REAL_DATA)"
+	@echo "make bench       run the benchmarks against their Python peers (installs the peers from PyPI)"
+	@echo "make libtorch    assemble CPU libtorch 2.13.0 from PyPI wheels into third_party/libtorch"
+
+# libtorch from PyPI wheels (idempotent). Skipped when the user points the build elsewhere.
+libtorch:
+	@if [[ -n "$${LIBTORCH_USE_PYTORCH:-}" ]]; then echo "using the installed PyTorch (LIBTORCH_USE_PYTORCH)"; \
+	else ./scripts/fetch-libtorch.sh; fi
+
+build: libtorch
+	$(CARGO) build --release
+
+demo: libtorch
+	$(CARGO) run --release -- demo --out out/demo
+
+test: libtorch
+	$(CARGO) test --release
+
+bench-deps:
+	./scripts/install-bench-peers.sh
+
+bench: libtorch bench-deps
+	$(CARGO) bench --bench geometry
+
+clean-libtorch:
+	rm -rf third_party/libtorch

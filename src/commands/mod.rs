@@ -1,0 +1,5 @@
+//! One module per subcommand; each parses nothing itself and calls library functions.
+
+pub mod demo;
+pub mod inspect;
+pub mod synth;

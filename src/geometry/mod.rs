@@ -1,0 +1,27 @@
+//! Pure geometry: intrinsics, depth maps, SE(3) poses, z-buffer projection, crops, voxels, overlap.
+//!
+//! Units: metres (`f32` for points and depth, `f64` for poses and intrinsics). Pixel convention (the
+//! official code's): pixel (column c, row r) has the integer coordinate (c, r), so a point projects to
+//! `c = round_half_even(x·fx/z + cx)`. Poses are named `t_<to>_from_<from>`: `p_to = R·p_from + t`.
+
+pub mod crop;
+pub mod depth;
+pub mod intrinsics;
+pub mod overlap;
+pub mod pose;
+pub mod pose_sampling;
+pub mod projection;
+pub mod voxel;
+mod radix;
+
+pub use crop::AxisBox;
+pub use depth::{backproject, backproject_with_pixels, DepthMap, DepthRange};
+pub use intrinsics::{Intrinsics, ResizeCrop};
+pub use overlap::{overlap, Overlap, RadiusIndex};
+pub use pose::{pose_from_rows, pose_to_rows, relative_pose, transform_points};
+pub use pose_sampling::PivotPoseSampler;
+pub use projection::{project_zbuffer, Projection};
+pub use voxel::voxel_downsample;
+
+/// A 3D point in metres.
+pub type Point = nalgebra::Point3<f32>;
