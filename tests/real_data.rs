@@ -1,8 +1,7 @@
 //! Ingest on the real RGB-D samples in `../shared/realdata` (7-Scenes redkitchen, SUN3D studyroom,
 //! a RealSense capture): listing, decoding, invalid-depth handling and pose consistency.
 //!
-//! The folder is given by `POINTREGGPT_REAL_DATA`. Without it the tests are skipped with a note on a
-//! developer machine and fail under CI (when `CI` is set).
+//! The folder is given by `POINTREGGPT_REAL_DATA`; without it the tests fail (see `support::real_data`).
 
 use nalgebra::Isometry3;
 use pointreggpt::geometry::{backproject, project_zbuffer, relative_pose, DepthMap, DepthRange, Intrinsics};
@@ -10,23 +9,8 @@ use pointreggpt::sources::{depth_png, open_sequences, threedmatch, Frame, Layout
 use rayon::prelude::*;
 use std::path::PathBuf;
 
-/// The real-data folder, or `None` (after a note) when it is not configured on a developer machine.
-fn real_data() -> Option<PathBuf> {
-    match std::env::var_os("POINTREGGPT_REAL_DATA") {
-        Some(dir) => {
-            let dir = PathBuf::from(dir);
-            assert!(dir.is_dir(), "POINTREGGPT_REAL_DATA={} is not a folder", dir.display());
-            Some(dir)
-        }
-        None if std::env::var_os("CI").is_some() => {
-            panic!("CI must set POINTREGGPT_REAL_DATA to the real-data folder (../shared/realdata)")
-        }
-        None => {
-            eprintln!("note: POINTREGGPT_REAL_DATA is not set; skipping the real-data test");
-            None
-        }
-    }
-}
+mod support;
+use support::real_data;
 
 fn load_all(dir: &std::path::Path) -> Vec<Frame> {
     let seqs = threedmatch::open(dir).unwrap();
