@@ -18,6 +18,8 @@ pub struct Cli {
 
 #[derive(Debug, Subcommand)]
 pub enum Command {
+    /// Build a dataset of registration pairs from a pipeline config (resumable, shardable).
+    Build(commands::build::BuildArgs),
     /// Render a synthetic indoor scene, re-project one frame into a sampled pose, and write the two
     /// clouds (PLY), the depth maps (PNG) and the pose: the whole geometric path on embedded defaults.
     Demo(commands::demo::DemoArgs),
@@ -39,6 +41,7 @@ impl Cli {
             let _ = rayon::ThreadPoolBuilder::new().num_threads(n).build_global();
         }
         match &self.command {
+            Command::Build(a) => commands::build::run(a, out),
             Command::Demo(a) => commands::demo::run(a, out),
             Command::Synth(a) => commands::synth::run(a, out),
             Command::Inspect(a) => commands::inspect::run(a, out),

@@ -33,6 +33,15 @@ pub enum Error {
     #[error("parquet/arrow: {0}")]
     Parquet(String),
 
+    /// A fatal error while a stage processed one work unit.
+    #[error("{stage} failed on {unit}: {source}")]
+    Unit {
+        stage: String,
+        unit: String,
+        #[source]
+        source: Box<Error>,
+    },
+
     /// A bug: an invariant of the program does not hold.
     #[error("internal error: {0}")]
     Internal(String),

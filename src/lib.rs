@@ -7,7 +7,11 @@ pub mod correction;
 pub mod error;
 pub mod geometry;
 pub mod inpainting;
+pub mod pipeline;
 pub mod rng;
+pub mod runtime;
+pub mod shards;
 pub mod sources;
+pub mod stages;
 
 pub use error::{Error, Result};

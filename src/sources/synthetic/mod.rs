@@ -16,6 +16,7 @@
 //! (`t_world_from_camera`), camera frame x right, y down, z forward (OpenCV / 3DMatch). Everything is
 //! deterministic for a seed, whatever the thread count.
 
+mod furnish;
 mod render;
 mod scene;
 mod sensor;
@@ -24,7 +25,7 @@ mod trajectory;
 mod writer;
 
 pub use render::Render;
-pub use scene::{Scene, SceneConfig, LOW_TOP_M, WALL_BAND_M};
+pub use scene::{camera_zone, Scene, SceneConfig, LOW_TOP_M, WALL_BAND_M};
 pub use sensor::SensorConfig;
 pub use shapes::{Aabb, Hit, Shape};
 pub use trajectory::{look_pose, trajectory, CAMERA_CLEARANCE_M};

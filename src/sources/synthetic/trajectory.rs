@@ -2,7 +2,7 @@
 //! at head height, looking outwards and slightly down at the walls and furniture, with slow swings of
 //! heading, pitch, height and radius, like a person scanning the room with a 30 Hz depth sensor.
 
-use super::scene::{Scene, LOW_TOP_M, WALL_BAND_M};
+use super::scene::{camera_zone, Scene, LOW_TOP_M};
 use crate::rng::Rng;
 use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
 use std::f64::consts::{PI, TAU};
@@ -12,7 +12,8 @@ pub const CAMERA_CLEARANCE_M: f64 = 0.25;
 
 /// Camera-to-world pose of a camera at `position` whose optical axis has heading `yaw` (radians
 /// about world z, 0 = +x), elevation `pitch` (radians, negative looks down) and `roll` about the
-/// optical axis (radians). Camera frame: x right, y down, z forward.
+/// optical axis (radians); `pitch` must lie strictly between −π/2 and π/2. Camera frame: x right,
+/// y down, z forward.
 pub fn look_pose(position: Point3<f64>, yaw: f64, pitch: f64, roll: f64) -> Isometry3<f64> {
     let f = Vector3::new(yaw.cos() * pitch.cos(), yaw.sin() * pitch.cos(), pitch.sin());
     let right = f.cross(&Vector3::z()).normalize();
@@ -39,15 +40,15 @@ impl Wave {
 fn attempt(scene: &Scene, min: Point3<f64>, max: Point3<f64>, n_frames: usize, rng: &mut Rng) -> Option<Vec<Isometry3<f64>>> {
     let size = max - min;
     let centre = nalgebra::center(&min, &max);
-    // Stay clear of the wall band (tall furniture) by a margin that grows with the room.
-    let keep = |l: f64| (0.3 * l).clamp(WALL_BAND_M + 0.58, 1.8);
-    let ax = (size.x / 2.0 - keep(size.x)).max(0.0) * rng.uniform_range(0.7, 1.0);
-    let ay = (size.y / 2.0 - keep(size.y)).max(0.0) * rng.uniform_range(0.7, 1.0);
+    // Inside the open middle of the room, clear of the furniture along the walls.
+    let (zx, zy) = camera_zone(&size);
+    let ax = zx * rng.uniform_range(0.7, 1.0);
+    let ay = zy * rng.uniform_range(0.7, 1.0);
     // About 1.5 cm per frame along the ring (0.45 m/s), at most 0.7° of orbit per frame.
     let omega = (0.015 / ax.max(ay).max(0.05)).min(0.012) * if rng.uniform() < 0.5 { -1.0 } else { 1.0 };
     let phase = rng.uniform_range(0.0, TAU);
     let height = rng.uniform_range(1.4, 1.6).min(max.z - 0.5).max(LOW_TOP_M + 0.3);
-    let pitch0 = rng.uniform_range(-0.45, -0.2);
+    let pitch0 = rng.uniform_range(-0.5, -0.25);
     let radius = Wave::random(rng, 0.15, (150.0, 300.0));
     let bob = Wave::random(rng, 0.06, (90.0, 200.0));
     let swing = rng.uniform_range(0.3, 0.7);
@@ -69,8 +70,9 @@ fn attempt(scene: &Scene, min: Point3<f64>, max: Point3<f64>, n_frames: usize, r
 }
 
 /// `n_frames` camera-to-world poses of a smooth hand-held path inside `scene`'s room (consecutive
-/// poses about 1–2 cm and 1–3° apart, camera 1.35–1.7 m above the floor, outside every object).
-/// The same seed gives the same path. Panics when the scene has no room shell.
+/// poses at most 1.5 cm and about 0.1–2° apart, camera 1.34–1.66 m above the floor, looking 10–35°
+/// down, at least [`CAMERA_CLEARANCE_M`] from every surface). The same seed gives the same path.
+/// Panics when the scene has no room shell.
 pub fn trajectory(scene: &Scene, n_frames: usize, seed: u64) -> Vec<Isometry3<f64>> {
     let (min, max) = scene.room().expect("trajectory needs a scene with a room shell");
     let base = Rng::new(seed).fork(0x7EA7);

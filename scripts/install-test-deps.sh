@@ -1,0 +1,41 @@
+#!/usr/bin/env bash
+# Installs the Python modules the integration tests read shards with (tests/python/read_shards.py):
+# pyarrow and duckdb, pinned. `make test` runs this first.
+#
+# Idempotent: does nothing when `import pyarrow, duckdb` already works.
+# PYTHON selects the interpreter (default python3).
+set -euo pipefail
+
+PYTHON="${PYTHON:-python3}"
+PYARROW_VERSION="26.0.1"
+DUCKDB_VERSION="2.0.0"
+CHECK='import pyarrow, duckdb'
+
+die() {
+    echo "install-test-deps: $*" >&2
+    exit 1
+}
+
+modules_import() {
+    "$PYTHON" -c "$CHECK" >/dev/null 2>&1
+}
+
+if modules_import; then
+    echo "install-test-deps: already installed ($("$PYTHON" -c 'import pyarrow, duckdb; print("pyarrow", pyarrow.__version__, "duckdb", duckdb.__version__)'))"
+    exit 0
+fi
+
+command -v "$PYTHON" >/dev/null 2>&1 || die "no Python interpreter '$PYTHON' (set PYTHON=...)"
+"$PYTHON" -m pip --version >/dev/null 2>&1 || die "'$PYTHON -m pip' does not work; install pip first"
+
+echo "install-test-deps: $PYTHON -m pip install pyarrow==$PYARROW_VERSION duckdb==$DUCKDB_VERSION"
+if ! "$PYTHON" -m pip install --disable-pip-version-check -q \
+    "pyarrow==$PYARROW_VERSION" "duckdb==$DUCKDB_VERSION"; then
+    die "pip install failed: is PyPI reachable? (see pip's message above)"
+fi
+
+if ! modules_import; then
+    "$PYTHON" -c "$CHECK" || true
+    die "pyarrow and duckdb were installed but do not import (see the error above)"
+fi
+echo "install-test-deps: done"

@@ -1,0 +1,118 @@
+//! `pointreggpt build`: turn depth frames into a dataset of registration pairs.
+
+use crate::error::{Error, Result};
+use crate::pipeline::overrides::apply_override;
+use crate::pipeline::{run_build, BuildConfig, BuildOptions};
+use crate::runtime::CancelToken;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+#[derive(Debug, clap::Args)]
+#[command(after_help = "Scale-out: run the same command as N workers (a Slurm job array, a Kubernetes Indexed Job, \
+or by hand with --worker i --workers N) on one dataset folder; worker i builds the shards k with k mod N = i. \
+An interrupted build resumes where it stopped when run again with the same config.")]
+pub struct BuildArgs {
+    /// Pipeline config (TOML), for example pipelines/demo.toml.
+    pub config: PathBuf,
+    /// Dataset folder; created, or resumed when it holds a dataset with the same config.
+    /// Default: out/<config file stem>.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Override a config value (repeatable), e.g. --set voxelize.voxel=0.03 --set source.path=/data/3dmatch.
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub set: Vec<String>,
+    /// This worker's index, 0-based. Default: $SLURM_ARRAY_TASK_ID (minus $SLURM_ARRAY_TASK_MIN),
+    /// $JOB_COMPLETION_INDEX, $AWS_BATCH_JOB_ARRAY_INDEX, else 0.
+    #[arg(long)]
+    pub worker: Option<u64>,
+    /// Number of workers. Default: $SLURM_ARRAY_TASK_COUNT, $POINTREGGPT_WORKERS, else 1.
+    #[arg(long)]
+    pub workers: Option<u64>,
+    /// Stop at the first bad input frame instead of recording it as an `input_error` row.
+    #[arg(long)]
+    pub strict: bool,
+    /// No progress bars.
+    #[arg(long)]
+    pub no_progress: bool,
+    /// Print the resolved config (every default filled in) and exit.
+    #[arg(long)]
+    pub print_config: bool,
+}
+
+/// Reads a config file and applies `--set` overrides.
+pub fn load_config(path: &Path, set: &[String]) -> Result<BuildConfig> {
+    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    let mut doc: toml::Table = text.parse().map_err(|e: toml::de::Error| Error::config(path.display().to_string(), e.to_string()))?;
+    for s in set {
+        apply_override(&mut doc, s)?;
+    }
+    let config: BuildConfig = toml::Value::Table(doc)
+        .try_into()
+        .map_err(|e: toml::de::Error| Error::config(path.display().to_string(), e.to_string()))?;
+    config.validate()?;
+    Ok(config)
+}
+
+/// The worker index and count from the flags or the scheduler's environment.
+pub fn worker_from_env(worker: Option<u64>, workers: Option<u64>) -> Result<(u64, u64)> {
+    let env = |k: &str| -> Result<Option<u64>> {
+        match std::env::var(k) {
+            Ok(v) if !v.trim().is_empty() => v.trim().parse().map(Some).map_err(|_| Error::config(k, format!("`{v}` is not a non-negative integer"))),
+            _ => Ok(None),
+        }
+    };
+    let worker = match worker {
+        Some(w) => w,
+        None => match env("SLURM_ARRAY_TASK_ID")? {
+            Some(id) => id.checked_sub(env("SLURM_ARRAY_TASK_MIN")?.unwrap_or(0)).ok_or_else(|| Error::config("SLURM_ARRAY_TASK_ID", "is below SLURM_ARRAY_TASK_MIN"))?,
+            None => env("JOB_COMPLETION_INDEX")?.or(env("AWS_BATCH_JOB_ARRAY_INDEX")?).unwrap_or(0),
+        },
+    };
+    let workers = match workers {
+        Some(n) => n,
+        None => env("SLURM_ARRAY_TASK_COUNT")?.or(env("POINTREGGPT_WORKERS")?).unwrap_or(1),
+    };
+    Ok((worker, workers))
+}
+
+pub fn run(args: &BuildArgs, out: &mut dyn Write) -> Result<()> {
+    let w = |e: std::io::Error| Error::io("<stdout>", e);
+    let config = load_config(&args.config, &args.set)?;
+    if args.print_config {
+        write!(out, "{}", config.to_toml()).map_err(w)?;
+        return Ok(());
+    }
+    let (worker, workers) = worker_from_env(args.worker, args.workers)?;
+    let dataset = args.out.clone().unwrap_or_else(|| {
+        PathBuf::from("out").join(args.config.file_stem().unwrap_or_default())
+    });
+    let opts = BuildOptions { out: dataset.clone(), worker, workers, strict: args.strict, progress: !args.no_progress };
+    let cancel = CancelToken::new();
+    cancel.cancel_on_signals();
+    let r = run_build(&config, &opts, &cancel)?;
+
+    let rows: u64 = r.rows_by_status.values().sum();
+    writeln!(out, "dataset {} (config {})", dataset.display(), &config.dataset_hash()[..12]).map_err(w)?;
+    writeln!(
+        out,
+        "{} units in {} shards; worker {worker} of {workers}: {} shards already committed, {} committed now{}",
+        r.total_units,
+        r.total_shards,
+        r.already_committed,
+        r.committed_now.len(),
+        if r.summary.cancelled { " (interrupted: run the same command again to resume)" } else { "" }
+    )
+    .map_err(w)?;
+    let by: Vec<String> = r.rows_by_status.iter().map(|(k, v)| format!("{k} {v}")).collect();
+    writeln!(out, "rows written: {rows} ({})", if by.is_empty() { "none".into() } else { by.join(", ") }).map_err(w)?;
+    writeln!(out, "time {:.1} s, {:.1} pairs/s", r.summary.wall.as_secs_f64(), r.summary.rate()).map_err(w)?;
+    write!(out, "{}", r.summary.stage_table()).map_err(w)?;
+    writeln!(out, "committed shards: {}/shards/pairs-*.parquet (listed in {}/manifest/)", dataset.display(), dataset.display()).map_err(w)?;
+    writeln!(
+        out,
+        "query it, e.g.: python3 -c \"import duckdb; print(duckdb.sql(\\\"select status, count(*) n, avg(overlap_source) ov from '{}/shards/pairs-*.parquet' group by status\\\"))\"",
+        dataset.display()
+    )
+    .map_err(w)?;
+    Ok(())
+}

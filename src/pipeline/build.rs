@@ -1,0 +1,140 @@
+//! Assembles the stages of a build from its config and runs them over the units this worker owns.
+
+use super::catalog::{shard_count, shard_units, Catalog};
+use super::config::BuildConfig;
+use crate::error::{Error, Result};
+use crate::rng::unit_seed;
+use crate::runtime::{run_pipeline, CancelToken, RunSummary, StageSpec};
+use crate::shards::dataset::Dataset;
+use crate::shards::CODE_VERSION;
+use crate::stages::correct::{Correct, Target};
+use crate::stages::ingest::Ingest;
+use crate::stages::inpaint::Inpaint;
+use crate::stages::pack::Pack;
+use crate::stages::pose::PoseSampling;
+use crate::stages::reproject::Reproject;
+use crate::stages::sink::ShardSink;
+use crate::stages::validate::ValidateOverlap;
+use crate::stages::voxelize::Voxelize;
+use crate::stages::PairUnit;
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::PathBuf;
+use std::sync::Arc;
+
+/// How a build runs (nothing here changes the pairs it produces).
+#[derive(Clone, Debug)]
+pub struct BuildOptions {
+    /// The dataset folder.
+    pub out: PathBuf,
+    /// This worker's index and the number of workers: the worker takes shards `k` with `k mod workers == worker`.
+    pub worker: u64,
+    pub workers: u64,
+    /// Stop at the first bad input instead of recording an `input_error` row.
+    pub strict: bool,
+    /// Draw progress bars (on a terminal).
+    pub progress: bool,
+}
+
+/// What a build did.
+#[derive(Clone, Debug)]
+pub struct BuildReport {
+    pub dataset: PathBuf,
+    pub total_units: u64,
+    pub total_shards: u64,
+    /// Shards this worker owns that were already committed (skipped).
+    pub already_committed: u64,
+    /// Shards committed by this run.
+    pub committed_now: Vec<u64>,
+    /// Rows committed by this run, by status.
+    pub rows_by_status: BTreeMap<String, u64>,
+    pub summary: RunSummary,
+}
+
+/// Runs the build described by `config` into `opts.out`, resuming whatever is already committed there.
+pub fn run_build(config: &BuildConfig, opts: &BuildOptions, cancel: &CancelToken) -> Result<BuildReport> {
+    config.validate()?;
+    if opts.workers == 0 || opts.worker >= opts.workers {
+        return Err(Error::config("--worker", format!("worker index {} must be below the worker count {}", opts.worker, opts.workers)));
+    }
+    let catalog = Arc::new(Catalog::open(config)?);
+    let total_units = catalog.units();
+    let total_shards = shard_count(config.shard_size, total_units);
+    let dataset = Dataset::create_or_open(&opts.out, &config.to_toml(), &config.dataset_hash())?
+        .with_worker(format!("{}-of-{}", opts.worker, opts.workers));
+    dataset.clean_stale_temps()?;
+    let committed = dataset.committed("pairs")?;
+    let owned: Vec<u64> = (0..total_shards).filter(|k| k % opts.workers == opts.worker).collect();
+    let todo: BTreeSet<u64> = owned.iter().copied().filter(|k| !committed.contains_key(k)).collect();
+    let todo_units: u64 = todo.iter().map(|&k| { let (a, b) = shard_units(k, config.shard_size, total_units); b - a }).sum();
+
+    let units = {
+        let catalog = catalog.clone();
+        let (seed, shard_size) = (config.seed, config.shard_size);
+        todo.clone().into_iter().flat_map(move |k| {
+            let (a, b) = shard_units(k, shard_size, total_units);
+            a..b
+        })
+        .map(move |u| {
+            let (fi, si) = catalog.unit(u);
+            let f = &catalog.frames[fi];
+            PairUnit::new(u, fi, si, unit_seed(seed, &f.key, si as u64), f.scene.clone(), f.key.clone())
+        })
+    };
+    let stages = build_stages(config, catalog, opts.strict, rayon::current_num_threads());
+    let mut sink = ShardSink::new(&dataset, config.shard_size, total_units, todo);
+    let summary = run_pipeline(units, stages, &mut sink, todo_units, opts.progress, cancel)?;
+    Ok(BuildReport {
+        dataset: opts.out.clone(),
+        total_units,
+        total_shards,
+        already_committed: (owned.len() - sink.shards.len()) as u64,
+        committed_now: sink.committed.clone(),
+        rows_by_status: sink.rows_by_status.clone(),
+        summary,
+    })
+}
+
+/// The stages of the build pipeline, in order, each replicated over `threads` workers (a unit's work
+/// is a few milliseconds, so parallelism across units is what fills the cores; the sink restores unit
+/// order within each shard).
+fn build_stages(config: &BuildConfig, catalog: Arc<Catalog>, strict: bool, threads: usize) -> Vec<StageSpec<PairUnit>> {
+    let w = &config.working;
+    let n = threads;
+    vec![
+        StageSpec::replicated(n, || Ingest { catalog: catalog.clone(), working: w.clone(), strict }),
+        StageSpec::replicated(n, || PoseSampling {
+            sampler: config.pose.pivot_sampler(),
+            target: config.pose.target.clone(),
+            depth_range: w.depth_range(),
+            crop_box: w.crop_box,
+        }),
+        StageSpec::replicated(n, || Reproject),
+        StageSpec::replicated(n, || Correct { target: Target::Condition, corrector: config.correct.condition.build() }),
+        StageSpec::replicated(n, || Inpaint { inpainter: config.inpaint.build() }),
+        StageSpec::replicated(n, || Correct { target: Target::Output, corrector: config.correct.output.build() }),
+        StageSpec::replicated(n, || Voxelize { voxel: config.voxelize.voxel, min_points: config.voxelize.min_points, depth_range: w.depth_range(), crop_box: w.crop_box }),
+        StageSpec::replicated(n, || ValidateOverlap { config: config.validate.clone() }),
+        StageSpec::replicated(n, || Pack {
+            config_hash: config.content_hash(),
+            code_version: CODE_VERSION.to_string(),
+            stages_json: stages_json(config),
+            depth_maps: config.output.depth_maps,
+            size: w.size,
+        }),
+    ]
+}
+
+/// The provenance record of the stages: names and parameters (and model hashes when models exist).
+fn stages_json(config: &BuildConfig) -> String {
+    let v = serde_json::json!([
+        {"stage": "ingest", "select": config.select, "working": config.working},
+        {"stage": "pose", "sampler": "pivot", "params": config.pose},
+        {"stage": "reproject", "zbuffer": "nearest", "rounding": "half_even"},
+        {"stage": "correct_condition", "params": config.correct.condition},
+        {"stage": "inpaint", "params": config.inpaint},
+        {"stage": "correct_output", "params": config.correct.output},
+        {"stage": "voxelize", "params": config.voxelize},
+        {"stage": "validate", "params": config.validate},
+    ]);
+    v.to_string()
+}

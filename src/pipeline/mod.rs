@@ -1,0 +1,10 @@
+//! The build pipeline: its configuration, the frame catalog and work units, and the assembly of the
+//! stages into a run over a dataset folder.
+
+pub mod build;
+pub mod catalog;
+pub mod config;
+pub mod overrides;
+
+pub use build::{run_build, BuildOptions, BuildReport};
+pub use config::BuildConfig;

@@ -1,0 +1,181 @@
+//! Manifest entries: one small JSON file per committed shard (`manifest/<table>-<shard:06>.json`).
+//!
+//! A shard exists for readers and for resume only when its entry exists; the entry records what the
+//! shard file must be (size, blake3) so that `verify` can prove it.
+
+use crate::error::{Error, Result};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::time::{SystemTime, UNIX_EPOCH};
+
+/// What a committed shard is (`schemas/pairs-v1.md`, "Manifest entry").
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ManifestEntry {
+    /// Table name (`pairs`, `labels`).
+    pub table: String,
+    /// Shard index.
+    pub shard: u64,
+    /// The shard holds work units `first_unit .. first_unit + units`.
+    pub first_unit: u64,
+    pub units: u64,
+    /// Rows in the shard file.
+    pub rows: u64,
+    /// Rows per status.
+    pub rows_by_status: BTreeMap<String, u64>,
+    /// File name in `shards/`.
+    pub file: String,
+    /// Size of the file.
+    pub bytes: u64,
+    /// blake3 of the file's bytes, hex.
+    pub blake3: String,
+    /// The table's schema version (from the batch's schema metadata; empty if it had none).
+    pub schema_version: String,
+    /// The dataset's config hash.
+    pub config_hash: String,
+    /// `pointreggpt <version>` that committed the shard.
+    pub code_version: String,
+    /// Who committed it.
+    pub worker: String,
+    /// UTC time of the commit, RFC 3339.
+    pub created: String,
+}
+
+/// `<table>-<shard:06>`, the stem of a shard's file and of its manifest entry.
+pub fn shard_stem(table: &str, shard: u64) -> String {
+    format!("{table}-{shard:06}")
+}
+
+/// Parses `<table>-<digits>.<ext>` into (table, shard).
+pub fn parse_shard_file_name<'a>(name: &'a str, ext: &str) -> Option<(&'a str, u64)> {
+    let stem = name.strip_suffix(ext)?.strip_suffix('.')?;
+    let (table, shard) = stem.rsplit_once('-')?;
+    if shard.len() < 6 || !shard.bytes().all(|b| b.is_ascii_digit()) || check_table_name(table).is_err() {
+        return None;
+    }
+    Some((table, shard.parse().ok()?))
+}
+
+/// Table names are `[a-z0-9_]+` (they become file names and are split at the last `-`).
+pub fn check_table_name(table: &str) -> Result<()> {
+    if !table.is_empty() && table.bytes().all(|b| b.is_ascii_lowercase() || b.is_ascii_digit() || b == b'_') {
+        Ok(())
+    } else {
+        Err(Error::InvalidArgument(format!("table name {table:?}: use lowercase letters, digits and `_`")))
+    }
+}
+
+impl ManifestEntry {
+    /// The JSON text of the entry (pretty, one key a line, ending with a newline).
+    pub fn to_json(&self) -> String {
+        let mut s = serde_json::to_string_pretty(self).expect("a manifest entry serializes");
+        s.push('\n');
+        s
+    }
+
+    /// Reads and checks the entry at `path` (named `<table>-<shard:06>.json`): it must parse and agree
+    /// with its file name.
+    pub fn read(path: &Path) -> Result<ManifestEntry> {
+        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        let entry: ManifestEntry =
+            serde_json::from_str(&text).map_err(|e| Error::input(path, format!("not a manifest entry: {e}")))?;
+        let name = path.file_name().and_then(|n| n.to_str()).unwrap_or_default();
+        let expected = format!("{}.json", shard_stem(&entry.table, entry.shard));
+        if name != expected {
+            return Err(Error::input(path, format!("entry is for {expected}, not {name}")));
+        }
+        if entry.file != format!("{}.parquet", shard_stem(&entry.table, entry.shard)) {
+            return Err(Error::input(path, format!("entry names an unexpected shard file {:?}", entry.file)));
+        }
+        if entry.rows_by_status.values().sum::<u64>() != entry.rows {
+            return Err(Error::input(path, "rows_by_status does not add up to rows"));
+        }
+        Ok(entry)
+    }
+}
+
+/// The current UTC time, RFC 3339 with seconds (`2025-01-31T12:00:00Z`).
+pub fn utc_now() -> String {
+    let secs = SystemTime::now().duration_since(UNIX_EPOCH).map(|d| d.as_secs()).unwrap_or(0);
+    rfc3339(secs)
+}
+
+/// Formats seconds since the Unix epoch as RFC 3339 UTC.
+fn rfc3339(secs: u64) -> String {
+    let (days, rem) = (secs / 86_400, secs % 86_400);
+    // Civil date from days since 1970-01-01 (Howard Hinnant's algorithm).
+    let z = days as i64 + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1_460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let day = doy - (153 * mp + 2) / 5 + 1;
+    let month = if mp < 10 { mp + 3 } else { mp - 9 };
+    let year = yoe + era * 400 + i64::from(month <= 2);
+    format!("{year:04}-{month:02}-{day:02}T{:02}:{:02}:{:02}Z", rem / 3600, rem % 3600 / 60, rem % 60)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn entry() -> ManifestEntry {
+        ManifestEntry {
+            table: "pairs".into(),
+            shard: 12,
+            first_unit: 120,
+            units: 10,
+            rows: 10,
+            rows_by_status: BTreeMap::from([("ok".into(), 7), ("low_overlap".into(), 3)]),
+            file: "pairs-000012.parquet".into(),
+            bytes: 1234,
+            blake3: "ab".into(),
+            schema_version: "pairs/1".into(),
+            config_hash: "cf".into(),
+            code_version: "pointreggpt 0.1.0".into(),
+            worker: "h:1".into(),
+            created: utc_now(),
+        }
+    }
+
+    #[test]
+    fn rfc3339_known_dates() {
+        assert_eq!(rfc3339(0), "1970-01-01T00:00:00Z");
+        assert_eq!(rfc3339(951_782_400), "2000-02-29T00:00:00Z");
+        assert_eq!(rfc3339(1_709_251_199), "2024-02-29T23:59:59Z");
+        assert_eq!(rfc3339(4_102_444_800), "2100-01-01T00:00:00Z");
+        assert!(utc_now().starts_with("20"));
+    }
+
+    #[test]
+    fn file_names() {
+        assert_eq!(shard_stem("pairs", 12), "pairs-000012");
+        assert_eq!(parse_shard_file_name("pairs-000012.parquet", "parquet"), Some(("pairs", 12)));
+        assert_eq!(parse_shard_file_name("my_labels-1234567.json", "json"), Some(("my_labels", 1_234_567)));
+        assert_eq!(parse_shard_file_name("pairs-12.parquet", "parquet"), None);
+        assert_eq!(parse_shard_file_name("pairs-000012.json", "parquet"), None);
+        assert_eq!(parse_shard_file_name("Pairs-000012.parquet", "parquet"), None);
+        assert!(check_table_name("labels").is_ok());
+        assert!(check_table_name("a-b").is_err() && check_table_name("").is_err() && check_table_name("../x").is_err());
+    }
+
+    #[test]
+    fn json_round_trip_and_checks() {
+        let dir = tempfile::tempdir().unwrap();
+        let e = entry();
+        let path = dir.path().join("pairs-000012.json");
+        std::fs::write(&path, e.to_json()).unwrap();
+        assert_eq!(ManifestEntry::read(&path).unwrap(), e);
+        // Under another name, the entry is refused.
+        let other = dir.path().join("pairs-000013.json");
+        std::fs::write(&other, e.to_json()).unwrap();
+        assert!(ManifestEntry::read(&other).unwrap_err().to_string().contains("pairs-000013.json"));
+        // Counts that do not add up, and junk.
+        let bad = ManifestEntry { rows: 11, ..e.clone() };
+        std::fs::write(&path, bad.to_json()).unwrap();
+        assert!(ManifestEntry::read(&path).unwrap_err().to_string().contains("rows_by_status"));
+        std::fs::write(&path, "{\"table\": ").unwrap();
+        assert!(matches!(ManifestEntry::read(&path).unwrap_err(), Error::InputData { .. }));
+    }
+}

@@ -1,0 +1,54 @@
+//! Shards: the Arrow schemas, zstd Parquet files, the commit protocol and the manifest of a dataset.
+//!
+//! # Dataset layout
+//!
+//! ```text
+//! <root>/dataset.toml                           resolved pipeline config under a [dataset] header
+//!                                               (config_hash, schema_version, code_version, created)
+//! <root>/shards/<table>-<shard:06>.parquet      one shard: the rows of a fixed range of work units
+//! <root>/manifest/<table>-<shard:06>.json       one entry per committed shard (ManifestEntry)
+//! <root>/.tmp/<host>~<pid>~<target>~<nonce>.tmp files being written
+//! ```
+//!
+//! Tables: `pairs` ([`PairRow`], schema `pairs/1`, `schemas/pairs-v1.md`) and any other table a module
+//! brings as a [`RecordBatch`](arrow::array::RecordBatch) (`labels`), committed with
+//! [`Dataset::commit_shard`].
+//!
+//! # Commit protocol
+//!
+//! A shard is a fixed range of work units, so whichever worker builds it, it holds the same rows.
+//! Committing it ([`Dataset::commit_shard`]):
+//! 1. encode the batch as Parquet (zstd) and write it to a temporary file in `.tmp/`, fsync it;
+//! 2. publish it as `shards/<table>-<shard>.parquet` without replacing an existing file (hard link; a
+//!    file already there from another committer is adopted if it decodes with the same schema and row
+//!    count, else replaced), fsync `shards/`;
+//! 3. write the manifest entry (row counts, size and blake3 of the published file, config hash, code
+//!    version, worker, time) the same way: temporary file, fsync, rename into `manifest/`, fsync.
+//!
+//! Only shards with a manifest entry exist, for readers ([`Dataset::read_pairs`]) and for resume
+//! ([`Dataset::committed`]): a crash at any point leaves either a committed shard or nothing visible (an
+//! orphan shard file or a temporary file, which [`Dataset::verify`] lists and a resume redoes). Because a
+//! published shard file is never replaced by a valid one, the manifest entry always describes the file in
+//! place, however many workers commit the same shard concurrently. `dataset.toml` is created the same way
+//! on first use; a run whose config hash differs from the recorded one is refused, naming the differing
+//! config keys ([`Dataset::create_or_open`]).
+
+pub mod atomic;
+pub mod dataset;
+pub mod manifest;
+pub mod pairs;
+pub mod parquet_io;
+pub mod row;
+pub mod schema;
+pub mod verify;
+
+pub use dataset::{Dataset, DatasetHeader, PAIRS_TABLE};
+pub use manifest::ManifestEntry;
+pub use pairs::{batch_to_pairs, pairs_to_batch};
+pub use parquet_io::{read_parquet_file, write_parquet_bytes};
+pub use row::{PairRow, StageTiming, Status};
+pub use schema::{pairs_schema, SCHEMA_VERSION, SCHEMA_VERSION_KEY};
+pub use verify::{Problem, VerifyReport};
+
+/// The code version recorded in rows, manifest entries and `dataset.toml`.
+pub const CODE_VERSION: &str = concat!("pointreggpt ", env!("CARGO_PKG_VERSION"));

@@ -1,0 +1,24 @@
+//! The build pipeline's operators, one file each: thin adapters from the pure functions of
+//! `geometry`, `correction` and `inpainting` to the runtime's [`Stage`](crate::runtime::Stage) trait.
+//!
+//! ingest → pose → reproject → correct(condition) → inpaint → correct(output) → voxelize → validate → pack → sink
+
+pub mod correct;
+pub mod ingest;
+pub mod inpaint;
+pub mod pack;
+pub mod pose;
+pub mod reproject;
+pub mod sink;
+pub mod unit;
+pub mod validate;
+pub mod voxelize;
+
+pub use unit::PairUnit;
+
+/// Sub-streams of a unit's RNG, one per stage that draws, so adding draws to one stage never shifts
+/// another's.
+pub mod streams {
+    pub const POSE: u64 = 1;
+    pub const INPAINT: u64 = 2;
+}

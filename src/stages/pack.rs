@@ -1,0 +1,95 @@
+//! Pack: turn a finished unit (accepted or rejected) into its shard row, encoding the depth maps.
+
+use super::PairUnit;
+use crate::error::Result;
+use crate::geometry::{pose_to_rows, DepthMap};
+use crate::runtime::Stage;
+use crate::shards::row::PairRow;
+use crate::sources::depth_png::encode_depth_png;
+
+/// Row-level provenance shared by every row of a build.
+pub struct Pack {
+    pub config_hash: String,
+    pub code_version: String,
+    /// JSON array of the stages with their parameters and model hashes.
+    pub stages_json: String,
+    /// Store the depth maps and the known mask as PNG bytes.
+    pub depth_maps: bool,
+    pub size: u32,
+}
+
+impl Stage<PairUnit> for Pack {
+    fn name(&self) -> &'static str {
+        "pack"
+    }
+
+    fn handles_rejected(&self) -> bool {
+        true
+    }
+
+    fn process(&mut self, u: &mut PairUnit) -> Result<()> {
+        let k = u.k.map(|k| k.as_vector()).unwrap_or([0.0; 4]);
+        let png = |d: &Option<DepthMap>| -> Result<Vec<u8>> {
+            match d {
+                Some(d) if self.depth_maps => encode_depth_png(d.width(), d.height(), &d.to_raw(1000.0)),
+                _ => Ok(Vec::new()),
+            }
+        };
+        let known_mask_png = if self.depth_maps && !u.known.is_empty() {
+            encode_mask_png(&u.known, self.size, self.size)?
+        } else {
+            Vec::new()
+        };
+        u.row = Some(PairRow {
+            unit_index: u.unit_index,
+            pair_key: format!("{}#{}", u.frame_key, u.sample_index),
+            scene: u.scene.clone(),
+            frame_key: u.frame_key.clone(),
+            sample_index: u.sample_index,
+            source_path: std::mem::take(&mut u.source_path),
+            source_hash: std::mem::take(&mut u.source_hash),
+            status: u.status,
+            message: u.message.clone(),
+            seed: u.seed,
+            width: self.size,
+            height: self.size,
+            source_intrinsics: k,
+            target_intrinsics: k,
+            t_target_from_source: pose_to_rows(&u.t_target_from_source),
+            pose_draws: u.pose_draws,
+            source_points: std::mem::take(&mut u.source_points),
+            target_points: std::mem::take(&mut u.target_points),
+            overlap_source: u.overlap.source,
+            overlap_target: u.overlap.target,
+            source_depth_png: png(&u.source_depth)?,
+            condition_depth_png: png(&u.condition)?,
+            target_depth_png: png(&u.target_depth)?,
+            known_mask_png,
+            config_hash: self.config_hash.clone(),
+            code_version: self.code_version.clone(),
+            stages: self.stages_json.clone(),
+            timings: Vec::new(), // filled by the sink: the pack stage's own timing is recorded after this
+        });
+        u.source_depth = None;
+        u.condition = None;
+        u.target_depth = None;
+        u.known = Vec::new();
+        Ok(())
+    }
+}
+
+/// An 8-bit grayscale PNG of a mask (255 = set).
+pub fn encode_mask_png(mask: &[bool], width: u32, height: u32) -> Result<Vec<u8>> {
+    let mut out = Vec::new();
+    {
+        let mut enc = png::Encoder::new(&mut out, width, height);
+        enc.set_color(png::ColorType::Grayscale);
+        enc.set_depth(png::BitDepth::Eight);
+        enc.set_compression(png::Compression::Fast);
+        let data: Vec<u8> = mask.iter().map(|&m| if m { 255 } else { 0 }).collect();
+        enc.write_header()
+            .and_then(|mut w| w.write_image_data(&data))
+            .map_err(|e| crate::Error::Internal(format!("mask png: {e}")))?;
+    }
+    Ok(out)
+}

@@ -1,0 +1,93 @@
+//! The item that flows through the build pipeline: one work unit and everything computed for it.
+
+use crate::geometry::{DepthMap, Intrinsics, Overlap, Point};
+use crate::runtime::Item;
+use crate::shards::row::{PairRow, StageTiming, Status};
+use nalgebra::Isometry3;
+use std::time::Duration;
+
+/// One work unit (source frame, sample index) on its way to a row.
+#[derive(Debug)]
+pub struct PairUnit {
+    pub unit_index: u64,
+    pub frame_index: usize,
+    pub sample_index: u32,
+    /// The unit's seed: `unit_seed(build seed, frame key, sample index)`.
+    pub seed: u64,
+    pub scene: String,
+    pub frame_key: String,
+    pub status: Status,
+    /// Why the unit was rejected.
+    pub message: String,
+    pub source_path: String,
+    pub source_hash: String,
+    /// Working-resolution intrinsics (source and target cameras share them).
+    pub k: Option<Intrinsics>,
+    /// Source depth at the working resolution.
+    pub source_depth: Option<DepthMap>,
+    /// Source points in the crop box, full resolution (the "scene memory"), source camera frame.
+    pub memory: Vec<Point>,
+    pub t_target_from_source: Isometry3<f64>,
+    pub pose_draws: u32,
+    /// Re-projected condition (after correction) and its known-pixel mask.
+    pub condition: Option<DepthMap>,
+    pub known: Vec<bool>,
+    /// Final target depth (inpainted, corrected).
+    pub target_depth: Option<DepthMap>,
+    /// Voxelized clouds, each in its own camera frame.
+    pub source_points: Vec<Point>,
+    pub target_points: Vec<Point>,
+    pub overlap: Overlap,
+    pub timings: Vec<StageTiming>,
+    /// The finished row, filled by the pack stage.
+    pub row: Option<PairRow>,
+}
+
+impl PairUnit {
+    /// A fresh unit; stages fill the rest.
+    pub fn new(unit_index: u64, frame_index: usize, sample_index: u32, seed: u64, scene: String, frame_key: String) -> Self {
+        PairUnit {
+            unit_index,
+            frame_index,
+            sample_index,
+            seed,
+            scene,
+            frame_key,
+            status: Status::Ok,
+            message: String::new(),
+            source_path: String::new(),
+            source_hash: String::new(),
+            k: None,
+            source_depth: None,
+            memory: Vec::new(),
+            t_target_from_source: Isometry3::identity(),
+            pose_draws: 0,
+            condition: None,
+            known: Vec::new(),
+            target_depth: None,
+            source_points: Vec::new(),
+            target_points: Vec::new(),
+            overlap: Overlap { source: 0.0, target: 0.0 },
+            timings: Vec::new(),
+            row: None,
+        }
+    }
+
+    /// Marks the unit rejected with `status` and a reason.
+    pub fn reject(&mut self, status: Status, message: impl Into<String>) {
+        self.status = status;
+        self.message = message.into();
+    }
+}
+
+impl Item for PairUnit {
+    fn is_rejected(&self) -> bool {
+        self.status != Status::Ok
+    }
+    fn record_timing(&mut self, stage: &'static str, elapsed: Duration) {
+        self.timings.push(StageTiming { stage: stage.to_string(), ms: elapsed.as_secs_f64() * 1e3 });
+    }
+    fn describe(&self) -> String {
+        format!("unit {} ({} sample {})", self.unit_index, self.frame_key, self.sample_index)
+    }
+}
