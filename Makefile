@@ -7,12 +7,12 @@ PYTHON ?= python3
 POINTREGGPT_REAL_DATA ?= $(abspath $(wildcard ../shared/realdata))
 export POINTREGGPT_REAL_DATA
 
-.PHONY: all libtorch build demo test bench bench-deps clean-libtorch help
+.PHONY: all libtorch build demo test test-deps bench bench-deps clean-libtorch help
 
 all: build
 
 help:
-	@echo "make demo        run the main job on embedded synthetic scenes, write results to out/demo"
+	@echo "make demo        build 240 registration pairs from embedded synthetic scenes into out/demo"
 	@echo "make test        run every test (release build; real-data tests use POINTREGGPT_REAL_DATA)"
 	@echo "make bench       run the benchmarks against their Python peers (installs the peers from PyPI)"
 	@echo "make libtorch    assemble CPU libtorch 2.13.0 from PyPI wheels into third_party/libtorch"
@@ -26,9 +26,13 @@ build: libtorch
 	$(CARGO) build --release
 
 demo: libtorch
-	$(CARGO) run --release -- demo --out out/demo
+	$(CARGO) run --release -- build pipelines/demo.toml --out out/demo
 
-test: libtorch
+# Python peers the tests read shards with (pyarrow, DuckDB), from PyPI, once.
+test-deps:
+	./scripts/install-test-deps.sh
+
+test: libtorch test-deps
 	$(CARGO) test --release
 
 bench-deps:

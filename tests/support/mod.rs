@@ -24,3 +24,28 @@ pub fn real_data() -> Option<PathBuf> {
         ),
     }
 }
+
+/// The `pointreggpt` binary built for these tests.
+pub fn bin() -> std::process::Command {
+    std::process::Command::new(env!("CARGO_BIN_EXE_pointreggpt"))
+}
+
+/// The Python interpreter the tests run peers with (`PYTHON`, default `python3`).
+pub fn python() -> String {
+    std::env::var("PYTHON").unwrap_or_else(|_| "python3".into())
+}
+
+/// A small synthetic build config: `scenes` scenes of `frames` frames at `width`×`height` (fx scaled
+/// from 585 at 640), every `every`-th frame, `samples` samples per frame.
+pub fn synthetic_config(scenes: u32, frames: usize, every: usize, samples: u32, width: u32, height: u32, shard_size: u64) -> String {
+    let f = 585.0 * width as f64 / 640.0;
+    format!(
+        "seed = 11\nsamples_per_frame = {samples}\nshard_size = {shard_size}\n\
+         [source]\nkind = \"synthetic\"\nscenes = {scenes}\n\
+         [source.synthetic]\nframes = {frames}\n\
+         [source.synthetic.intrinsics]\nfx = {f}\nfy = {f}\ncx = {cx}\ncy = {cy}\nwidth = {width}\nheight = {height}\n\
+         [select]\nevery = {every}\n",
+        cx = width as f64 / 2.0,
+        cy = height as f64 / 2.0
+    )
+}
