@@ -59,6 +59,10 @@ pub fn main() -> ExitCode {
     let mut stdout = std::io::stdout().lock();
     match cli.run(&mut stdout) {
         Ok(()) => ExitCode::SUCCESS,
+        Err(crate::Error::Interrupted) => {
+            eprintln!("{}", crate::Error::Interrupted);
+            ExitCode::from(130)
+        }
         Err(e) => {
             eprintln!("error: {e}");
             ExitCode::FAILURE

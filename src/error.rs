@@ -42,6 +42,10 @@ pub enum Error {
         source: Box<Error>,
     },
 
+    /// The run was interrupted (Ctrl-C, SIGTERM); everything committed is kept.
+    #[error("interrupted: committed shards are kept; run the same command again to resume")]
+    Interrupted,
+
     /// A bug: an invariant of the program does not hold.
     #[error("internal error: {0}")]
     Internal(String),

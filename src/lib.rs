@@ -13,5 +13,6 @@ pub mod runtime;
 pub mod shards;
 pub mod sources;
 pub mod stages;
+pub mod tsdf;
 
 pub use error::{Error, Result};

@@ -116,6 +116,30 @@ fn sigkill_at_several_points_then_resume_gives_exactly_the_uninterrupted_pairs()
 }
 
 #[test]
+fn sigint_commits_complete_shards_exits_130_and_a_rerun_finishes() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("c.toml");
+    std::fs::write(&config, synthetic_config(2, 40, 2, 1, 640, 480, 2)).unwrap();
+    let reference = build_in_process(&std::fs::read_to_string(&config).unwrap(), &dir.path().join("ref"), 2);
+    let out = dir.path().join("ds");
+    let child = spawn_build(&config, &out, &[]);
+    std::thread::sleep(Duration::from_millis(900));
+    let pid = child.id().to_string();
+    assert!(std::process::Command::new("kill").args(["-INT", &pid]).status().unwrap().success());
+    let o = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(130), "{stderr}");
+    assert!(stderr.contains("interrupted"), "{stderr}");
+    let partial = digests(&out);
+    assert!(!partial.is_empty() && partial.len() < 40, "{} units committed at the interrupt", partial.len());
+    assert!(partial.iter().all(|(u, d)| reference.get(u) == Some(d)));
+    assert_clean(&out);
+    let o = spawn_build(&config, &out, &[]).wait_with_output().unwrap();
+    assert!(o.status.success());
+    assert_eq!(digests(&out), reference);
+}
+
+#[test]
 fn two_worker_processes_on_one_folder_equal_one_process() {
     let dir = tempfile::tempdir().unwrap();
     let config = dir.path().join("c.toml");

@@ -7,7 +7,6 @@ use nalgebra::Isometry3;
 use pointreggpt::geometry::{backproject, project_zbuffer, relative_pose, DepthMap, DepthRange, Intrinsics};
 use pointreggpt::sources::{depth_png, open_sequences, threedmatch, Frame, Layout};
 use rayon::prelude::*;
-use std::path::PathBuf;
 
 mod support;
 use support::real_data;

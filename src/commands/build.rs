@@ -114,5 +114,8 @@ pub fn run(args: &BuildArgs, out: &mut dyn Write) -> Result<()> {
         dataset.display()
     )
     .map_err(w)?;
+    if r.summary.cancelled {
+        return Err(Error::Interrupted);
+    }
     Ok(())
 }

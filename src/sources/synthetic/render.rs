@@ -20,31 +20,34 @@ pub struct Render {
     pub cos_incidence: Vec<f32>,
 }
 
-/// The pixel rectangle `[c0, r0, c1, r1]` that can see `b`, `None` when `b` is entirely behind the
-/// camera; the whole plane when it straddles the camera plane.
+/// The pixel rectangle `[c0, r0, c1, r1]` that can see `b`, `None` when `b` lies entirely behind
+/// the camera: the bounds of the projection of the part of `b` with camera z ≥ 1e-9 m (hits nearer
+/// than that are not counted anyway, see [`super::shapes::T_MIN`]), padded by a pixel.
 fn screen_rect(b: &Aabb, t_camera_from_world: &Isometry3<f64>, k: &Intrinsics) -> Option<[f64; 4]> {
-    let mut rect = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
-    let mut behind = 0;
+    const NEAR: f64 = 1e-9;
+    let corners: Vec<Point3<f64>> = (0..8)
+        .map(|i| {
+            let pick = |bit: usize, axis: usize| if i & bit == 0 { b.min[axis] } else { b.max[axis] };
+            t_camera_from_world * Point3::new(pick(1, 0), pick(2, 1), pick(4, 2))
+        })
+        .collect();
+    let mut visible: Vec<Point3<f64>> = corners.iter().filter(|p| p.z >= NEAR).copied().collect();
+    // Where the box's edges cross the near plane.
     for i in 0..8 {
-        let corner = Point3::new(
-            if i & 1 == 0 { b.min.x } else { b.max.x },
-            if i & 2 == 0 { b.min.y } else { b.max.y },
-            if i & 4 == 0 { b.min.z } else { b.max.z },
-        );
-        let p = t_camera_from_world * corner;
-        if p.z <= 1e-9 {
-            behind += 1;
-            continue;
+        for bit in [1, 2, 4] {
+            let (p, q) = (corners[i], corners[i | bit]);
+            if i & bit == 0 && (p.z < NEAR) != (q.z < NEAR) {
+                visible.push(p + (q - p) * ((NEAR - p.z) / (q.z - p.z)));
+            }
         }
-        let (u, v) = (k.fx * p.x / p.z + k.cx, k.fy * p.y / p.z + k.cy);
+    }
+    let mut rect = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
+    for p in &visible {
+        let z = p.z.max(NEAR);
+        let (u, v) = (k.fx * p.x / z + k.cx, k.fy * p.y / z + k.cy);
         rect = [rect[0].min(u), rect[1].min(v), rect[2].max(u), rect[3].max(v)];
     }
-    match behind {
-        8 => None,
-        0 => Some([rect[0] - 1.0, rect[1] - 1.0, rect[2] + 1.0, rect[3] + 1.0]),
-        // The projection of a box crossing the camera plane is unbounded.
-        _ => Some([f64::NEG_INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::INFINITY]),
-    }
+    (!visible.is_empty()).then_some([rect[0] - 1.0, rect[1] - 1.0, rect[2] + 1.0, rect[3] + 1.0])
 }
 
 impl Scene {
@@ -220,7 +223,37 @@ mod tests {
             }
         }
         let empty = Scene::from_shapes(vec![plane(Point3::new(0.0, 0.0, 1.0), Vector3::z())]);
+        assert_eq!(empty.raycast(&Point3::origin(), &Vector3::new(0.0, 0.0, -2.0)), None, "plane behind");
         assert_eq!(empty.raycast(&Point3::origin(), &Vector3::new(1.0, 0.0, 0.0)), None);
         assert_eq!(empty.raycast(&Point3::origin(), &Vector3::zeros()), None);
+    }
+
+    #[test]
+    fn screen_culling_never_hides_a_surface() {
+        // Wide-angle cameras at random free spots, often right next to furniture, so that bounding
+        // boxes straddle the camera plane: the culled render must equal a brute-force cast per pixel.
+        let k = Intrinsics::new(20.0, 20.0, 31.5, 23.5, 64, 48).unwrap();
+        let mut rng = crate::rng::Rng::new(8);
+        for seed in 0..6 {
+            let scene = Scene::generate(&SceneConfig::default(), seed);
+            let (_, max) = scene.room().unwrap();
+            let mut views = 0;
+            while views < 8 {
+                let o = Point3::new(rng.uniform_range(0.0, max.x), rng.uniform_range(0.0, max.y), rng.uniform_range(0.0, max.z));
+                if !scene.is_free(&o, 0.02) {
+                    continue;
+                }
+                views += 1;
+                let pose = look_pose(o, rng.uniform_range(0.0, 6.3), rng.uniform_range(-1.2, 1.2), rng.uniform_range(-0.5, 0.5));
+                let r = scene.render(&k, &pose);
+                for row in 0..48u32 {
+                    for c in 0..64u32 {
+                        let d = pose.rotation * Vector3::new((c as f64 - k.cx) / k.fx, (row as f64 - k.cy) / k.fy, 1.0);
+                        let t = scene.first_hit(&o, &d).map_or(0.0, |h| h.t as f32);
+                        assert_eq!(r.depth.at(c, row), t, "seed {seed}, pixel ({c},{row})");
+                    }
+                }
+            }
+        }
     }
 }

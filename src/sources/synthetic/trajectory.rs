@@ -70,7 +70,7 @@ fn attempt(scene: &Scene, min: Point3<f64>, max: Point3<f64>, n_frames: usize, r
 }
 
 /// `n_frames` camera-to-world poses of a smooth hand-held path inside `scene`'s room (consecutive
-/// poses at most 1.5 cm and about 0.1–2° apart, camera 1.34–1.66 m above the floor, looking 10–35°
+/// poses at most 1.5 cm and about 0.1–2° apart, camera 1.34–1.66 m above the floor, looking 9–34°
 /// down, at least [`CAMERA_CLEARANCE_M`] from every surface). The same seed gives the same path.
 /// Panics when the scene has no room shell.
 pub fn trajectory(scene: &Scene, n_frames: usize, seed: u64) -> Vec<Isometry3<f64>> {

@@ -1,0 +1,1 @@
+//! TSDF fusion (being written).
