@@ -25,6 +25,8 @@ pub enum Command {
     Demo(commands::demo::DemoArgs),
     /// Write a synthetic sequence (depth PNGs, camera-to-world poses, intrinsics) in the 3DMatch layout.
     Synth(commands::synth::SynthArgs),
+    /// Check every committed shard of a dataset against its manifest entry (size, blake3, schema, rows).
+    Verify(commands::verify::VerifyArgs),
     /// List the sequences and frames found under a folder (3DMatch / 7-Scenes / SUN3D, TUM, ScanNet),
     /// checking that every frame decodes.
     Inspect(commands::inspect::InspectArgs),
@@ -45,6 +47,7 @@ impl Cli {
             Command::Demo(a) => commands::demo::run(a, out),
             Command::Synth(a) => commands::synth::run(a, out),
             Command::Inspect(a) => commands::inspect::run(a, out),
+            Command::Verify(a) => commands::verify::run(a, out),
         }
     }
 }

@@ -272,3 +272,42 @@ fn pyarrow_and_duckdb_agree_with_the_counts_the_build_printed() {
     let points: u64 = rows.iter().map(|r| r.source_points.len() as u64).sum();
     assert_eq!(v["duckdb"]["source_points"].as_u64(), Some(points));
 }
+
+#[test]
+fn verify_finds_a_truncated_shard_and_a_bad_manifest_and_resume_redoes_only_those() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("c.toml");
+    std::fs::write(&config, synthetic_config(1, 16, 2, 1, 320, 240, 2)).unwrap();
+    let out = dir.path().join("ds");
+    assert!(spawn_build(&config, &out, &[]).wait().unwrap().success());
+    let reference = digests(&out);
+    let manifests_before: Vec<_> = (0..4).map(|k| std::fs::metadata(out.join(format!("manifest/pairs-{k:06}.json"))).unwrap().modified().unwrap()).collect();
+
+    // Truncate shard 1; make shard 2's manifest hash lie.
+    let shard1 = out.join("shards/pairs-000001.parquet");
+    let bytes = std::fs::read(&shard1).unwrap();
+    std::fs::write(&shard1, &bytes[..bytes.len() / 2]).unwrap();
+    let m2 = out.join("manifest/pairs-000002.json");
+    let text = std::fs::read_to_string(&m2).unwrap();
+    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let hash = v["blake3"].as_str().unwrap().to_string();
+    std::fs::write(&m2, text.replace(&hash, &"0".repeat(64))).unwrap();
+
+    let o = bin().args(["verify"]).arg(&out).output().unwrap();
+    assert!(!o.status.success());
+    let report = String::from_utf8_lossy(&o.stdout);
+    assert!(report.contains("pairs-000001.parquet") && report.contains("pairs-000002"), "{report}");
+    let o = bin().args(["verify", "--repair"]).arg(&out).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+
+    let o = spawn_build(&config, &out, &[]).wait_with_output().unwrap();
+    let summary = String::from_utf8_lossy(&o.stdout);
+    assert!(summary.contains("2 shards already committed, 2 committed now"), "{summary}");
+    assert_eq!(digests(&out), reference);
+    assert!(bin().args(["verify"]).arg(&out).status().unwrap().success());
+    // Shards 0 and 3 were not rewritten.
+    for k in [0usize, 3] {
+        let t = std::fs::metadata(out.join(format!("manifest/pairs-{k:06}.json"))).unwrap().modified().unwrap();
+        assert_eq!(t, manifests_before[k]);
+    }
+}

@@ -4,3 +4,4 @@ pub mod build;
 pub mod demo;
 pub mod inspect;
 pub mod synth;
+pub mod verify;

@@ -62,7 +62,7 @@ pub fn run_build(config: &BuildConfig, opts: &BuildOptions, cancel: &CancelToken
     let dataset = Dataset::create_or_open(&opts.out, &config.to_toml(), &config.dataset_hash())?
         .with_worker(format!("{}-of-{}", opts.worker, opts.workers));
     dataset.clean_stale_temps()?;
-    let committed = dataset.committed("pairs")?;
+    let committed = dataset.resumable("pairs")?;
     let owned: Vec<u64> = (0..total_shards).filter(|k| k % opts.workers == opts.worker).collect();
     let todo: BTreeSet<u64> = owned.iter().copied().filter(|k| !committed.contains_key(k)).collect();
     let todo_units: u64 = todo.iter().map(|&k| { let (a, b) = shard_units(k, config.shard_size, total_units); b - a }).sum();

@@ -231,6 +231,33 @@ impl Dataset {
         Ok(scan.entries.into_iter().filter(|((t, _), _)| t == table).map(|((_, s), e)| (s, e)).collect())
     }
 
+    /// The committed shards of `table` that a resume may skip: those whose file exists with the size its
+    /// manifest entry records (a cheap check; `verify` also hashes and decodes). The others are redone.
+    pub fn resumable(&self, table: &str) -> Result<BTreeMap<u64, ManifestEntry>> {
+        let mut committed = self.committed(table)?;
+        committed.retain(|_, e| {
+            let path = self.root.join(SHARDS_DIR).join(&e.file);
+            let ok = fs::metadata(&path).map(|m| m.len() == e.bytes).unwrap_or(false);
+            if !ok {
+                tracing::warn!("{}: missing or not the size its manifest entry records; the shard will be redone", path.display());
+            }
+            ok
+        });
+        Ok(committed)
+    }
+
+    /// Withdraws the manifest entry of a shard (the shard then no longer exists for readers and a resume
+    /// redoes it). Used by `verify --repair` on shards that fail verification.
+    pub fn retract(&self, table: &str, shard: u64) -> Result<()> {
+        check_table_name(table)?;
+        let path = self.manifest_path(table, shard);
+        match fs::remove_file(&path) {
+            Ok(()) => super::atomic::sync_dir(&self.root.join(MANIFEST_DIR)),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
+            Err(e) => Err(Error::io(&path, e)),
+        }
+    }
+
     /// The batches of a committed shard. Errors name the file when it is missing, has another size than
     /// its manifest entry says, does not decode or has another row count.
     pub fn read_shard_batches(&self, entry: &ManifestEntry) -> Result<Vec<RecordBatch>> {

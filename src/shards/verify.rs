@@ -18,6 +18,8 @@ pub struct Problem {
     pub path: PathBuf,
     /// What is wrong.
     pub message: String,
+    /// The (table, shard) whose manifest entry is concerned, when known (what `--repair` retracts).
+    pub shard: Option<(String, u64)>,
 }
 
 /// What [`Dataset::verify`] found.
@@ -75,7 +77,9 @@ impl Dataset {
         let mut report = VerifyReport::default();
         let scan = self.scan_manifest()?;
         for (path, message) in scan.unreadable {
-            report.problems.push(Problem { path, message });
+            let name = path.file_name().map(|n| n.to_string_lossy().to_string()).unwrap_or_default();
+            let shard = parse_shard_file_name(&name, "json").map(|(t, s)| (t.to_string(), s));
+            report.problems.push(Problem { path, message, shard });
         }
         for entry in scan.entries.values() {
             let path = self.root().join(SHARDS_DIR).join(&entry.file);
@@ -84,7 +88,7 @@ impl Dataset {
                     *report.shards_ok.entry(entry.table.clone()).or_default() += 1;
                     *report.rows_ok.entry(entry.table.clone()).or_default() += entry.rows;
                 }
-                Err(message) => report.problems.push(Problem { path, message }),
+                Err(message) => report.problems.push(Problem { path, message, shard: Some((entry.table.clone(), entry.shard)) }),
             }
         }
         for (path, name) in list_files(&self.root().join(SHARDS_DIR))? {
