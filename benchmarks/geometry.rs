@@ -4,13 +4,13 @@
 //! inputs as `.npy` files and runs `benchmarks/peers/geometry_peers.py`, which prints one
 //! tab-separated line per peer (`op, peer, ms, result`). See benchmarks/README.md.
 
+use nalgebra::Isometry3;
 use pointreggpt::geometry::{
     backproject, overlap, pose_to_rows, project_zbuffer, relative_pose, voxel_downsample, DepthMap, DepthRange,
     Intrinsics, Point,
 };
 use pointreggpt::sources::depth_png::read_depth_png;
 use pointreggpt::sources::text::{read_intrinsics_file, read_pose_file};
-use nalgebra::Isometry3;
 use std::hint::black_box;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -205,14 +205,12 @@ struct Peers {
 
 impl Peers {
     fn get(&self, op: &str, peer: &str) -> Timing {
-        self.timings
-            .iter()
-            .find(|(o, p, _)| o == op && p == peer)
-            .map(|(_, _, t)| t.clone())
-            .unwrap_or_else(|| Timing {
+        self.timings.iter().find(|(o, p, _)| o == op && p == peer).map(|(_, _, t)| t.clone()).unwrap_or_else(|| {
+            Timing {
                 ms: None,
-                result: self.failure.clone().unwrap_or_else(|| "not installed".into()),
-            })
+                result: if self.failure.is_some() { "peers did not run".into() } else { "not installed".into() },
+            }
+        })
     }
 }
 
@@ -301,7 +299,11 @@ fn parse_peers(stdout: &str) -> Peers {
 fn cpu_model() -> String {
     std::fs::read_to_string("/proc/cpuinfo")
         .ok()
-        .and_then(|s| s.lines().find(|l| l.starts_with("model name")).map(|l| l.split(':').nth(1).unwrap_or("").trim().to_string()))
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("model name"))
+                .map(|l| l.split(':').nth(1).unwrap_or("").trim().to_string())
+        })
         .unwrap_or_else(|| "unknown".into())
 }
 
@@ -323,6 +325,9 @@ fn print_header(x: &Inputs, peers: &Peers, load: &str) {
         rayon::current_num_threads(),
         load
     );
+    if load.parse::<f64>().is_ok_and(|l| l > 0.5) {
+        println!("WARNING: load average {load} at start: other processes share the cores, so timings are noisy");
+    }
     let versions: Vec<String> = peers.info.iter().map(|(n, v)| format!("{n} {v}")).collect();
     println!("peers:   {}", if versions.is_empty() { "none ran".to_string() } else { versions.join(", ") });
     if let Some(f) = &peers.failure {
@@ -387,24 +392,38 @@ fn print_targets(ours: &[Timing], peers: &Peers) {
             None => "now: no peer ran".into(),
         };
         let issue = match op.issue {
-            Some((name, ms)) => format!(" | issue's earlier figure: {name} {ms} ms -> {:.2}x {}", ms / o, verdict(ms / o)),
+            Some((name, ms)) => {
+                format!(" | issue's earlier figure: {name} {ms} ms -> {:.2}x {}", ms / o, verdict(ms / o))
+            }
             None => " | (no issue figure)".into(),
         };
         println!("  {:<24} ours {o:.3} ms | {now}{issue}", op.title);
     }
 }
 
+/// "yes" when two results are equal; for counts (`name=N`) that differ, the peer's difference.
+fn agreement(ours: &str, peer: &str) -> String {
+    if ours == peer {
+        return "yes".into();
+    }
+    let count = |s: &str| s.split_once('=').and_then(|(_, n)| n.parse::<i64>().ok());
+    match (count(ours), count(peer)) {
+        (Some(a), Some(b)) => format!("differs ({:+}, {:+.2}%)", b - a, (b - a) as f64 * 100.0 / a.max(1) as f64),
+        _ => "differs".into(),
+    }
+}
+
 fn print_sanity(ours: &[Timing], peers: &Peers) {
     println!();
     println!("Sanity: results on the same inputs (Open3D's voxel grid origin and pixel rounding differ from ours)");
-    println!("{:<24} {:<38} {:<30} {:<30} {}", "operation", "peer", "ours", "peer", "same?");
+    println!("{:<24} {:<38} {:<30} {:<30} same?", "operation", "peer", "ours", "peer");
     println!("{}", "-".repeat(130));
     for (op, our) in OPS.iter().zip(ours) {
         for name in op.peers {
             let t = peers.get(op.key, name);
             let (value, same) = match t.ms {
-                Some(_) => (t.result.clone(), if t.result == our.result { "yes" } else { "differs" }),
-                None => ("n/a".to_string(), ""),
+                Some(_) => (t.result.clone(), agreement(&our.result, &t.result)),
+                None => ("n/a".to_string(), String::new()),
             };
             println!("{:<24} {name:<38} {:<30} {value:<30} {same}", op.title, our.result);
         }

@@ -11,14 +11,16 @@ cd "$(dirname "$0")/.."
 PYTHON="${PYTHON:-python3}"
 REQUIREMENTS="benchmarks/requirements.txt"
 CHECK='import numpy, scipy, pykdtree, numba, open3d'
+VERSIONS='print("numpy", numpy.__version__, "numba", numba.__version__, "open3d", open3d.__version__)'
 
 die() {
     echo "install-bench-peers: $*" >&2
     exit 1
 }
 
+# Prints the peers' versions when they all import; fails otherwise.
 peers_import() {
-    "$PYTHON" -c "$CHECK" >/dev/null 2>&1
+    "$PYTHON" -c "$CHECK; $VERSIONS" 2>/dev/null
 }
 
 # libusb-1.0-0 from Debian: apt-get update only when the plain install fails (stale lists).
@@ -48,16 +50,16 @@ install_python_peers() {
     fi
 }
 
-if peers_import; then
-    echo "install-bench-peers: peers already installed ($("$PYTHON" -c 'import numpy, open3d; print("numpy", numpy.__version__, "open3d", open3d.__version__)'))"
+if versions=$(peers_import); then
+    echo "install-bench-peers: peers already installed ($versions)"
     exit 0
 fi
 
 install_libusb
 install_python_peers
 
-if ! peers_import; then
+if ! versions=$(peers_import); then
     "$PYTHON" -c "$CHECK" || true
     die "the peers were installed but do not import (see the error above)"
 fi
-echo "install-bench-peers: done"
+echo "install-bench-peers: done ($versions)"

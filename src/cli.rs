@@ -20,6 +20,8 @@ pub struct Cli {
 pub enum Command {
     /// Build a dataset of registration pairs from a pipeline config (resumable, shardable).
     Build(commands::build::BuildArgs),
+    /// Build depth-correction training labels by TSDF fusion of sequences (resumable, shardable).
+    Labels(commands::labels::LabelsArgs),
     /// Render a synthetic indoor scene, re-project one frame into a sampled pose, and write the two
     /// clouds (PLY), the depth maps (PNG) and the pose: the whole geometric path on embedded defaults.
     Demo(commands::demo::DemoArgs),
@@ -30,6 +32,14 @@ pub enum Command {
     /// List the sequences and frames found under a folder (3DMatch / 7-Scenes / SUN3D, TUM, ScanNet),
     /// checking that every frame decodes.
     Inspect(commands::inspect::InspectArgs),
+    /// Export pairs for trainers: the PointRegGPT authors' layout (gt.log), GeoTransformer's 3DMatch
+    /// pickle + .npy, or PLY pairs; `--where` filters rows, `--limit` caps the count.
+    Export(commands::export::ExportArgs),
+    /// Write one PNG montage per pair: depth maps, condition with unknown pixels, known mask, inpainted
+    /// target, and both clouds aligned by the stored pose.
+    Preview(commands::preview::PreviewArgs),
+    /// Rows by status (reject reasons) and overlap histograms, as stats.txt and a stats.png bar plot.
+    Stats(commands::stats::StatsArgs),
 }
 
 impl Cli {
@@ -45,9 +55,13 @@ impl Cli {
         match &self.command {
             Command::Build(a) => commands::build::run(a, out),
             Command::Demo(a) => commands::demo::run(a, out),
+            Command::Labels(a) => commands::labels::run(a, out),
             Command::Synth(a) => commands::synth::run(a, out),
             Command::Inspect(a) => commands::inspect::run(a, out),
             Command::Verify(a) => commands::verify::run(a, out),
+            Command::Export(a) => commands::export::run(a, out),
+            Command::Preview(a) => commands::preview::run(a, out),
+            Command::Stats(a) => commands::stats::run(a, out),
         }
     }
 }

@@ -123,7 +123,12 @@ fn sigint_commits_complete_shards_exits_130_and_a_rerun_finishes() {
     let reference = build_in_process(&std::fs::read_to_string(&config).unwrap(), &dir.path().join("ref"), 2);
     let out = dir.path().join("ds");
     let child = spawn_build(&config, &out, &[]);
-    std::thread::sleep(Duration::from_millis(900));
+    // Interrupt once the first shard is committed (the handler is installed before any work starts).
+    let t0 = std::time::Instant::now();
+    while std::fs::read_dir(out.join("manifest")).map(|d| d.count()).unwrap_or(0) == 0 {
+        assert!(t0.elapsed() < Duration::from_secs(120), "no shard committed in 2 minutes");
+        std::thread::sleep(Duration::from_millis(20));
+    }
     let pid = child.id().to_string();
     assert!(std::process::Command::new("kill").args(["-INT", &pid]).status().unwrap().success());
     let o = child.wait_with_output().unwrap();

@@ -49,8 +49,8 @@ def run(op, peer, fn, describe, reps, warmup=2):
         emit(op, peer, "n/a", f"failed: {type(e).__name__}: {e}".replace("\t", " ").replace("\n", " "))
 
 
-def missing(op, peer, module):
-    emit(op, peer, "n/a", f"not installed ({module})")
+def missing(op, peer):
+    emit(op, peer, "n/a", "not installed")
 
 
 def try_import(name):
@@ -107,8 +107,8 @@ def bench_backproject(np, o3d, x):
 
     run(op, "numpy", numpy_backproject, lambda p: f"points={len(p)}", x.reps)
     if o3d is None:
-        missing(op, "open3d legacy create_from_depth_image", "open3d")
-        missing(op, "open3d tensor create_from_depth_image", "open3d")
+        missing(op, "open3d legacy create_from_depth_image")
+        missing(op, "open3d tensor create_from_depth_image")
         return
     # Open3D keeps 0 < z < depth_trunc (no near bound), so its count can exceed ours.
     intr = o3d.camera.PinholeCameraIntrinsic(x.width, x.height, x.fx, x.fy, x.cx, x.cy)
@@ -195,13 +195,13 @@ def bench_zbuffer(np, numba, o3d, x):
     run(op, "numpy minimum.at", lambda: numpy_zbuffer(np, x), known, max(5, x.reps // 2))
     run(op, "numpy argsort+assign", lambda: numpy_sort_zbuffer(np, x), known, max(5, x.reps // 2))
     if numba is None:
-        missing(op, "numba njit", "numba")
+        missing(op, "numba njit")
     else:
         zb = make_numba_zbuffer(numba, np)
         pts, m = np.ascontiguousarray(x.points), np.ascontiguousarray(x.pose_reproj)
         run(op, "numba njit", lambda: zb(pts, m, x.fx, x.fy, x.cx, x.cy, x.width, x.height), known, x.reps)
     if o3d is None:
-        missing(op, "open3d tensor project_to_depth_image", "open3d")
+        missing(op, "open3d tensor project_to_depth_image")
         return
     cloud = o3d.t.geometry.PointCloud(o3d.core.Tensor(np.ascontiguousarray(x.points)))
     tk = o3d.core.Tensor(x.k_matrix(np))
@@ -234,8 +234,8 @@ def bench_voxel(np, o3d, x):
     op = "voxel"
     run(op, "numpy unique", lambda: numpy_voxel(np, x.points, x.voxel), lambda v: f"voxels={len(v)}", max(5, x.reps // 2))
     if o3d is None:
-        missing(op, "open3d legacy voxel_down_sample", "open3d")
-        missing(op, "open3d tensor voxel_down_sample", "open3d")
+        missing(op, "open3d legacy voxel_down_sample")
+        missing(op, "open3d tensor voxel_down_sample")
         return
     legacy = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(x.points.astype(np.float64)))
     run(
@@ -268,7 +268,7 @@ def bench_overlap(np, x):
     r = x.radius
     scipy_spatial = try_import("scipy.spatial")
     if scipy_spatial is None:
-        missing(op, "scipy cKDTree (workers=-1)", "scipy")
+        missing(op, "scipy cKDTree (workers=-1)")
     else:
         from scipy.spatial import cKDTree
 
@@ -282,7 +282,7 @@ def bench_overlap(np, x):
 
     pykdtree_kdtree = try_import("pykdtree.kdtree")
     if pykdtree_kdtree is None:
-        missing(op, "pykdtree", "pykdtree")
+        missing(op, "pykdtree")
     else:
         from pykdtree.kdtree import KDTree
 
@@ -299,7 +299,7 @@ def bench_overlap_open3d(np, o3d, x):
     op = "overlap"
     if o3d is None:
         for peer in ("open3d compute_point_cloud_distance", "open3d tensor NNS hybrid", "open3d KDTreeFlann loop"):
-            missing(op, peer, "open3d")
+            missing(op, peer)
         return
     r = x.radius
     vec = o3d.utility.Vector3dVector
@@ -350,10 +350,7 @@ def info(np, numba, o3d):
     from importlib import metadata
 
     for name in ("scipy", "pykdtree", "numba", "open3d"):
-        try:
-            emit("info", name, metadata.version(name))
-        except metadata.PackageNotFoundError:
-            emit("info", name, "not installed")
+        emit("info", name, metadata.version(name) if try_import(name) else "not installed")
     omp = os.environ.get("OMP_NUM_THREADS", f"{os.cpu_count()} (default)")
     emit("info", "peer threads", f"numba 1 (serial njit); open3d and pykdtree OpenMP {omp}; cKDTree workers=-1")
 
@@ -362,9 +359,7 @@ def main():
     if len(sys.argv) != 2:
         sys.exit(__doc__)
     np = try_import("numpy")
-    if np is None:
-        for op, peer in (("backproject", "numpy"), ("zbuffer", "numpy minimum.at"), ("voxel", "numpy unique")):
-            missing(op, peer, "numpy")
+    if np is None:  # the Rust side shows every peer as "n/a (not installed)"
         emit("info", "numpy", "not installed: no Python peer can run")
         return
     numba = try_import("numba")

@@ -39,16 +39,19 @@ pub struct BuildArgs {
     pub print_config: bool,
 }
 
-/// Reads a config file and applies `--set` overrides.
-pub fn load_config(path: &Path, set: &[String]) -> Result<BuildConfig> {
+/// Reads a pipeline config file of any kind and applies `--set` overrides.
+pub fn load_toml<T: serde::de::DeserializeOwned>(path: &Path, set: &[String]) -> Result<T> {
     let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
     let mut doc: toml::Table = text.parse().map_err(|e: toml::de::Error| Error::config(path.display().to_string(), e.to_string()))?;
     for s in set {
         apply_override(&mut doc, s)?;
     }
-    let config: BuildConfig = toml::Value::Table(doc)
-        .try_into()
-        .map_err(|e: toml::de::Error| Error::config(path.display().to_string(), e.to_string()))?;
+    toml::Value::Table(doc).try_into().map_err(|e: toml::de::Error| Error::config(path.display().to_string(), e.to_string()))
+}
+
+/// Reads and validates a build config.
+pub fn load_config(path: &Path, set: &[String]) -> Result<BuildConfig> {
+    let config: BuildConfig = load_toml(path, set)?;
     config.validate()?;
     Ok(config)
 }

@@ -2,6 +2,10 @@
 
 pub mod build;
 pub mod demo;
+pub mod export;
 pub mod inspect;
+pub mod labels;
+pub mod preview;
+pub mod stats;
 pub mod synth;
 pub mod verify;

@@ -35,6 +35,7 @@
 
 pub mod atomic;
 pub mod dataset;
+pub mod labels;
 pub mod manifest;
 pub mod pairs;
 pub mod parquet_io;
@@ -43,6 +44,7 @@ pub mod schema;
 pub mod verify;
 
 pub use dataset::{Dataset, DatasetHeader, PAIRS_TABLE};
+pub use labels::{batch_to_labels, labels_schema, labels_to_batch, LabelRow, LABELS_TABLE};
 pub use manifest::ManifestEntry;
 pub use pairs::{batch_to_pairs, pairs_to_batch};
 pub use parquet_io::{read_parquet_file, write_parquet_bytes};

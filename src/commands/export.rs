@@ -1,0 +1,54 @@
+//! `pointreggpt export`: write a dataset's pairs in a layout registration trainers read.
+
+use crate::error::{Error, Result};
+use crate::export::{export, ExportOptions, Filter, Format};
+use crate::shards::dataset::Dataset;
+use std::io::Write;
+use std::path::PathBuf;
+
+#[derive(Debug, clap::Args)]
+#[command(after_help = "Columns for --where: status, scene, frame_key, pair_key (text, quoted: 'ok'), overlap_source, \
+overlap_target, sample_index, unit_index, n_source_points, n_target_points (numbers); comparisons = != < <= > >=, \
+joined by and/or with parentheses, e.g. --where \"overlap_source >= 0.3 and (scene = 'a' or scene = 'b')\". \
+The pointreggpt and geotransformer formats take ok rows only; ply writes every matching row.")]
+pub struct ExportArgs {
+    /// The dataset folder.
+    pub dataset: PathBuf,
+    /// Output layout.
+    #[arg(long, value_enum)]
+    pub format: Format,
+    /// Output folder (must not exist or be empty).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Only rows matching this predicate, e.g. "status = 'ok' and overlap_source >= 0.3".
+    #[arg(long = "where", value_name = "PREDICATE")]
+    pub filter: Option<String>,
+    /// Write at most N pairs.
+    #[arg(long, value_name = "N")]
+    pub limit: Option<usize>,
+    /// No progress bar.
+    #[arg(long)]
+    pub no_progress: bool,
+}
+
+pub fn run(args: &ExportArgs, out: &mut dyn Write) -> Result<()> {
+    let w = |e: std::io::Error| Error::io("<stdout>", e);
+    let filter = Filter::parse_opt(args.filter.as_deref())?;
+    let ds = Dataset::open(&args.dataset)?;
+    let opts = ExportOptions { format: args.format, out: args.out.clone(), filter, limit: args.limit, progress: !args.no_progress };
+    let r = export(&ds, &opts)?;
+    let format = format!("{:?}", args.format).to_lowercase();
+    let mut extra = Vec::new();
+    if r.skipped > 0 {
+        extra.push(format!("{} matching rows not ok, skipped", r.skipped));
+    }
+    if let Some(n) = r.gt_log_lines {
+        extra.push(format!("{n} listed in metadata/gt.log by the official keep rule"));
+    }
+    if args.limit.is_some_and(|n| r.written as usize == n) {
+        extra.push(format!("--limit {} reached", r.written));
+    }
+    let extra = if extra.is_empty() { String::new() } else { format!(" ({})", extra.join("; ")) };
+    writeln!(out, "read {} rows, {} matched; wrote {} pairs ({format} format) to {}{extra}", r.rows_read, r.matched, r.written, args.out.display()).map_err(w)?;
+    Ok(())
+}

@@ -1,0 +1,96 @@
+//! Streaming the committed rows of a dataset shard by shard (so memory holds one shard), in unit order,
+//! and the progress bar the export, preview and stats commands draw over them.
+
+use crate::error::{Error, Result};
+use crate::shards::dataset::{Dataset, PAIRS_TABLE};
+use crate::shards::pairs::batch_to_pairs;
+use crate::shards::row::PairRow;
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+
+/// Rows of the committed `pairs` shards, from their manifest entries.
+pub fn committed_row_count(ds: &Dataset) -> Result<u64> {
+    Ok(ds.committed(PAIRS_TABLE)?.values().map(|e| e.rows).sum())
+}
+
+/// Calls `f` with every committed row, in `unit_index` order (shards hold consecutive unit ranges),
+/// reading one shard at a time; stops early when `f` returns `Ok(false)`.
+pub fn for_each_row(ds: &Dataset, mut f: impl FnMut(PairRow) -> Result<bool>) -> Result<()> {
+    for entry in ds.committed(PAIRS_TABLE)?.values() {
+        let mut rows = Vec::new();
+        for batch in ds.read_shard_batches(entry)? {
+            let path = ds.root().join("shards").join(&entry.file);
+            rows.extend(batch_to_pairs(&batch).map_err(|e| Error::input(&path, e.to_string()))?);
+        }
+        rows.sort_by_key(|r| r.unit_index);
+        for row in rows {
+            if !f(row)? {
+                return Ok(());
+            }
+        }
+    }
+    Ok(())
+}
+
+/// A bar over `total` rows on stderr, drawn only when `visible` and stderr is a terminal.
+pub fn progress_bar(total: u64, visible: bool, label: &str) -> ProgressBar {
+    let target = if visible { ProgressDrawTarget::stderr_with_hz(4) } else { ProgressDrawTarget::hidden() };
+    let style = ProgressStyle::with_template("{prefix:>10} {bar:30} {pos:>7}/{len:7} {per_sec:>10} {msg}")
+        .expect("valid template")
+        .progress_chars("=> ");
+    ProgressBar::with_draw_target(Some(total), target).with_style(style).with_prefix(label.to_string())
+}
+
+/// A file-name-safe form of a key: characters other than ASCII letters, digits, `.`, `-` and `_`
+/// become `_` (`synthetic-0/frame-000000#0` → `synthetic-0_frame-000000_0`).
+pub fn sanitize(key: &str) -> String {
+    let s: String = key.chars().map(|c| if c.is_ascii_alphanumeric() || matches!(c, '.' | '-' | '_') { c } else { '_' }).collect();
+    if s.is_empty() || s.chars().all(|c| c == '.') {
+        format!("_{s}")
+    } else {
+        s
+    }
+}
+
+/// A unique file name for `key` among those already `used`: [`sanitize`]d, with `~<unit_index>`
+/// appended when two keys sanitize to the same name.
+pub fn unique_name(used: &mut std::collections::HashSet<String>, key: &str, unit_index: u64) -> String {
+    let mut name = sanitize(key);
+    if used.contains(&name) {
+        name = format!("{name}~{unit_index}");
+    }
+    used.insert(name.clone());
+    name
+}
+
+/// Creates `dir`, refusing one that exists and is not empty (an export never mixes with old files).
+pub fn create_empty_dir(dir: &std::path::Path) -> Result<()> {
+    if let Ok(mut entries) = std::fs::read_dir(dir) {
+        if entries.next().is_some() {
+            return Err(Error::config("--out", format!("{} exists and is not empty; choose a new folder or remove it", dir.display())));
+        }
+    }
+    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sanitize_and_unique_names() {
+        assert_eq!(sanitize("synthetic-0/frame-000000#0"), "synthetic-0_frame-000000_0");
+        assert_eq!(sanitize(".."), "_..");
+        let mut used = Default::default();
+        assert_eq!(unique_name(&mut used, "a/b", 1), "a_b");
+        assert_eq!(unique_name(&mut used, "a#b", 2), "a_b~2");
+    }
+
+    #[test]
+    fn refuses_a_non_empty_out_folder() {
+        let dir = tempfile::tempdir().unwrap();
+        create_empty_dir(&dir.path().join("new/sub")).unwrap();
+        create_empty_dir(&dir.path().join("new/sub")).unwrap();
+        let e = create_empty_dir(&dir.path().join("new")).unwrap_err().to_string();
+        assert!(e.contains("not empty"), "{e}");
+    }
+}

@@ -1,0 +1,92 @@
+//! Runs the label pipeline over the windows this worker owns.
+
+use super::config::LabelsConfig;
+use super::stages::{Fuse, LabelSink, LabelUnit, SampleAndLabel};
+use super::windows::windows;
+use crate::error::{Error, Result};
+use crate::pipeline::catalog::{shard_count, shard_units};
+use crate::pipeline::BuildOptions;
+use crate::runtime::{run_pipeline, CancelToken, RunSummary, StageSpec};
+use crate::shards::dataset::Dataset;
+use crate::shards::labels::LABELS_TABLE;
+use crate::shards::row::Status;
+use crate::shards::CODE_VERSION;
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::PathBuf;
+use std::sync::Arc;
+
+/// What a label run did.
+#[derive(Clone, Debug)]
+pub struct LabelsReport {
+    pub dataset: PathBuf,
+    pub windows: u64,
+    pub total_shards: u64,
+    pub already_committed: u64,
+    pub committed_now: Vec<u64>,
+    pub rows_by_status: BTreeMap<String, u64>,
+    pub summary: RunSummary,
+}
+
+/// Runs the label pipeline into `opts.out` (resuming what is committed there).
+pub fn run_labels(config: &LabelsConfig, opts: &BuildOptions, cancel: &CancelToken) -> Result<LabelsReport> {
+    config.validate()?;
+    if opts.workers == 0 || opts.worker >= opts.workers {
+        return Err(Error::config("--worker", format!("worker index {} must be below the worker count {}", opts.worker, opts.workers)));
+    }
+    let (catalog, windows) = windows(config)?;
+    let catalog = Arc::new(catalog);
+    let total = windows.len() as u64;
+    let total_shards = shard_count(config.shard_size, total);
+    let dataset = Dataset::create_or_open(&opts.out, &config.to_toml(), &config.dataset_hash())?
+        .with_worker(format!("{}-of-{}", opts.worker, opts.workers));
+    dataset.clean_stale_temps()?;
+    let committed = dataset.resumable(LABELS_TABLE)?;
+    let owned: Vec<u64> = (0..total_shards).filter(|k| k % opts.workers == opts.worker).collect();
+    let todo: BTreeSet<u64> = owned.iter().copied().filter(|k| !committed.contains_key(k)).collect();
+    let todo_units: u64 = todo.iter().map(|&k| { let (a, b) = shard_units(k, config.shard_size, total); b - a }).sum();
+    let units = {
+        let (windows, shard_size, seed) = (windows.clone(), config.shard_size, config.seed);
+        todo.clone().into_iter().flat_map(move |k| { let (a, b) = shard_units(k, shard_size, total); a..b }).map(move |u| {
+            let window = windows[u as usize].clone();
+            LabelUnit {
+                unit_index: u,
+                seed: crate::rng::unit_seed(seed, &window.key, 0),
+                window,
+                status: Status::Ok,
+                message: String::new(),
+                k: None,
+                dense: Vec::new(),
+                sparse: Vec::new(),
+                volume: None,
+                rows: Vec::new(),
+                timings: BTreeMap::new(),
+            }
+        })
+    };
+    let n = rayon::current_num_threads();
+    let stages_json = serde_json::json!([
+        {"stage": "fuse", "tsdf": config.tsdf, "window": config.window, "clouds": config.clouds, "working": config.working},
+        {"stage": "label", "pose": config.pose, "tau_gt": config.tau_gt, "rule": "|I_s - I_d| < tau_gt"},
+    ])
+    .to_string();
+    let stages = vec![
+        StageSpec::replicated(n, || Fuse { catalog: catalog.clone(), config: config.clone(), strict: opts.strict }),
+        StageSpec::replicated(n, || SampleAndLabel {
+            config: config.clone(),
+            config_hash: config.content_hash(),
+            code_version: CODE_VERSION.to_string(),
+            stages_json: stages_json.clone(),
+        }),
+    ];
+    let mut sink = LabelSink::new(&dataset, catalog.clone(), config.shard_size, total, todo);
+    let summary = run_pipeline(units, stages, &mut sink, todo_units, opts.progress, cancel)?;
+    Ok(LabelsReport {
+        dataset: opts.out.clone(),
+        windows: total,
+        total_shards,
+        already_committed: (owned.len() - sink.shards.len()) as u64,
+        committed_now: sink.committed.clone(),
+        rows_by_status: sink.rows_by_status.clone(),
+        summary,
+    })
+}

@@ -1,0 +1,59 @@
+//! Windows of consecutive frames: the work units of the label pipeline.
+
+use super::config::{LabelsConfig, Reference};
+use crate::error::{Error, Result};
+use crate::pipeline::catalog::Catalog;
+use crate::pipeline::config::SelectConfig;
+
+/// One window: catalog indices of its consecutive frames and of its reference frame.
+#[derive(Clone, Debug)]
+pub struct Window {
+    pub scene: String,
+    /// `<scene>/window-XXXXXX` (window number within its sequence).
+    pub key: String,
+    pub frames: Vec<usize>,
+    pub reference: usize,
+}
+
+/// Every frame of every sequence (no selection), and the windows over them.
+pub fn windows(config: &LabelsConfig) -> Result<(Catalog, Vec<Window>)> {
+    let as_build = crate::pipeline::BuildConfig {
+        seed: config.seed,
+        samples_per_frame: 1,
+        shard_size: 1,
+        source: config.source.clone(),
+        select: SelectConfig::default(),
+        working: config.working.clone(),
+        pose: config.pose.clone(),
+        correct: Default::default(),
+        inpaint: crate::inpainting::InpaintConfig::None,
+        voxelize: Default::default(),
+        validate: Default::default(),
+        output: Default::default(),
+    };
+    let catalog = Catalog::open(&as_build)?;
+    let mut out = Vec::new();
+    let mut start = 0;
+    while start < catalog.frames.len() {
+        let scene = catalog.frames[start].scene.clone();
+        let end = (start..catalog.frames.len()).find(|&i| catalog.frames[i].scene != scene).unwrap_or(catalog.frames.len());
+        let n = end - start;
+        let (len, stride) = (config.window.frames, config.window.stride);
+        let mut w = 0;
+        while w * stride + len <= n {
+            let first = start + w * stride;
+            let frames: Vec<usize> = (first..first + len).collect();
+            let reference = match config.window.reference {
+                Reference::First => frames[0],
+                Reference::Middle => frames[len / 2],
+            };
+            out.push(Window { key: format!("{scene}/window-{w:06}"), scene: scene.clone(), frames, reference });
+            w += 1;
+        }
+        start = end;
+    }
+    if out.is_empty() {
+        return Err(Error::config("window.frames", format!("no sequence has {} frames", config.window.frames)));
+    }
+    Ok((catalog, out))
+}

@@ -1,0 +1,280 @@
+//! `export`, `preview` and `stats` end to end on a small synthetic dataset: every export format read
+//! back (Rust readers and Python: numpy PLY parser, pickle, np.load), ground-truth alignment, the
+//! official gt.log keep rule, `--where`/`--limit` against rows filtered in Rust, PNG outputs, and the
+//! pyarrow `PairDataset` of tests/python/pair_dataset.py.
+
+mod support;
+
+use pointreggpt::export::npy::read_npy_points;
+use pointreggpt::export::pointreggpt::official_keep;
+use pointreggpt::geometry::{pose_from_rows, transform_points};
+use pointreggpt::pipeline::{run_build, BuildConfig, BuildOptions};
+use pointreggpt::preview::montage_size;
+use pointreggpt::preview::stats::{overlap_bin, PLOT_SIZE, STATUSES};
+use pointreggpt::runtime::CancelToken;
+use pointreggpt::shards::dataset::Dataset;
+use pointreggpt::shards::row::{PairRow, Status};
+use pointreggpt::sources::ply::read_ply;
+use serde_json::json;
+use std::path::{Path, PathBuf};
+use support::{bin, python, synthetic_config};
+
+/// 2 scenes × 4 frames, one sample each, shards of 4; `min_overlap = 0.6` rejects some pairs, so the
+/// dataset holds `ok` and `low_overlap` rows.
+fn build(dir: &Path) -> (PathBuf, Vec<PairRow>) {
+    let text = synthetic_config(2, 12, 3, 1, 320, 240, 4) + "[validate]\nmin_overlap = 0.6\n";
+    let config = BuildConfig::from_toml(&text, "test").unwrap();
+    let out = dir.join("ds");
+    let opts = BuildOptions { out: out.clone(), worker: 0, workers: 1, strict: false, progress: false };
+    run_build(&config, &opts, &CancelToken::new()).unwrap();
+    let rows = Dataset::open(&out).unwrap().read_pairs().unwrap();
+    assert_eq!(rows.len(), 8);
+    let ok = rows.iter().filter(|r| r.status == Status::Ok).count();
+    assert!((3..8).contains(&ok), "the test wants both ok and rejected rows, got {ok} ok");
+    (out, rows)
+}
+
+/// Runs the binary; returns (success, stdout, stderr).
+fn run(args: &[&str]) -> (bool, String, String) {
+    let o = bin().args(args).arg("--no-progress").output().unwrap();
+    (o.status.success(), String::from_utf8_lossy(&o.stdout).into_owned(), String::from_utf8_lossy(&o.stderr).into_owned())
+}
+
+fn export(ds: &Path, format: &str, out: &Path, extra: &[&str]) -> String {
+    let mut args = vec!["export", ds.to_str().unwrap(), "--format", format, "--out", out.to_str().unwrap()];
+    args.extend_from_slice(extra);
+    let (ok, stdout, stderr) = run(&args);
+    assert!(ok, "export {format} failed: {stderr}");
+    stdout
+}
+
+/// The pair keys listed in an export's `metadata/pairs.tsv`.
+fn exported_keys(out: &Path) -> Vec<String> {
+    let text = std::fs::read_to_string(out.join("metadata/pairs.tsv")).unwrap();
+    text.lines().skip(1).map(|l| l.split('\t').nth(1).unwrap().to_string()).collect()
+}
+
+fn keys<'a>(rows: impl IntoIterator<Item = &'a PairRow>) -> Vec<String> {
+    rows.into_iter().map(|r| r.pair_key.clone()).collect()
+}
+
+fn script(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python").join(name)
+}
+
+#[test]
+fn every_format_reads_back_and_agrees_with_the_rows() {
+    let dir = tempfile::tempdir().unwrap();
+    let (ds, rows) = build(dir.path());
+    let ok: Vec<&PairRow> = rows.iter().filter(|r| r.status == Status::Ok).collect();
+    let (official, geo, ply) = (dir.path().join("official"), dir.path().join("geo"), dir.path().join("ply"));
+    let line = export(&ds, "pointreggpt", &official, &[]);
+    assert!(line.contains(&format!("wrote {} pairs (pointreggpt format)", ok.len())), "{line}");
+    assert!(line.contains(&format!("{} matching rows not ok, skipped", rows.len() - ok.len())), "{line}");
+    export(&ds, "geotransformer", &geo, &[]);
+    export(&ds, "ply", &ply, &[]);
+
+    // The authors' layout, read with our own readers.
+    assert_eq!(exported_keys(&official), keys(ok.iter().copied()));
+    let gt = std::fs::read_to_string(official.join("metadata/gt.log")).unwrap();
+    let mut want_gt = String::new();
+    for (k, r) in ok.iter().enumerate() {
+        let d = official.join(format!("data/scene-{k:06}"));
+        assert_eq!(read_ply(&d.join("sample-000000.cloud.ply")).unwrap(), r.source_points);
+        let pose = pose_from_rows(&r.t_target_from_source).unwrap();
+        let back = transform_points(&read_ply(&d.join("sample-000001.cloud.ply")).unwrap(), &pose);
+        let err = back.iter().zip(&r.target_points).map(|(a, b)| (a - b).norm()).fold(0.0f32, f32::max);
+        assert!(err < 1e-5, "target cloud is inv(T)·target: {err}");
+        if official_keep(r) {
+            want_gt += &format!("scene-{k:06}\t0\t1\t{:.4}\t{:.4}\n", r.overlap_source, r.overlap_target);
+        }
+    }
+    assert_eq!(gt, want_gt);
+    assert!(!gt.is_empty());
+
+    // GeoTransformer's .npy clouds and PLY pairs (every row, rejected ones too).
+    for (k, r) in ok.iter().enumerate() {
+        let d = geo.join("data/train").join(&r.scene);
+        assert_eq!(read_npy_points(&d.join(format!("cloud_bin_{}.npy", 2 * k))).unwrap(), r.target_points);
+        assert_eq!(read_npy_points(&d.join(format!("cloud_bin_{}.npy", 2 * k + 1))).unwrap(), r.source_points);
+    }
+    assert_eq!(exported_keys(&ply), keys(&rows));
+    for r in &rows {
+        let d = ply.join(r.pair_key.replace(['/', '#'], "_"));
+        assert_eq!(read_ply(&d.join("source.ply")).unwrap(), r.source_points);
+        assert_eq!(read_ply(&d.join("target.ply")).unwrap(), r.target_points);
+    }
+
+    // Python: numpy PLY parser, np.loadtxt, pickle.load, np.load and the alignment check.
+    let plan = json!({
+        "pointreggpt": official, "geotransformer": geo, "ply": ply,
+        "exported": keys(ok.iter().copied()), "ply_exported": keys(&rows),
+    });
+    let plan_path = dir.path().join("plan.json");
+    std::fs::write(&plan_path, plan.to_string()).unwrap();
+    let o = std::process::Command::new(python()).arg(script("check_exports.py")).arg(&ds).arg(&plan_path).output().unwrap();
+    assert!(o.status.success(), "check_exports.py failed (numpy and pyarrow are required: scripts/install-test-deps.sh):\n{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["pointreggpt"]["scenes"], ok.len());
+    assert_eq!(v["geotransformer"]["entries"], ok.len());
+    assert_eq!(v["geotransformer"]["overlaps_bit_exact"], ok.len());
+    assert_eq!(v["ply"]["pairs"], rows.len());
+}
+
+#[test]
+fn where_and_limit_select_exactly_the_rows_filtered_in_rust() {
+    let dir = tempfile::tempdir().unwrap();
+    let (ds, rows) = build(dir.path());
+    type Predicate = Box<dyn Fn(&PairRow) -> bool>;
+    let cases: Vec<(&str, Predicate)> = vec![
+        ("status = 'ok' and overlap_source >= 0.6", Box::new(|r| r.status == Status::Ok && r.overlap_source >= 0.6)),
+        ("scene = 'synthetic-1' or status != 'ok'", Box::new(|r| r.scene == "synthetic-1" || r.status != Status::Ok)),
+        ("(unit_index < 3 or unit_index >= 6) and n_target_points > 1000", Box::new(|r| (r.unit_index < 3 || r.unit_index >= 6) && r.target_points.len() > 1000)),
+        ("overlap_target <= 0.75 AND frame_key != 'synthetic-0/frame-000000'", Box::new(|r| r.overlap_target <= 0.75 && r.frame_key != "synthetic-0/frame-000000")),
+        ("status = 'low_overlap'", Box::new(|r| r.status == Status::LowOverlap)),
+        ("pair_key = 'nothing#0'", Box::new(|_| false)),
+    ];
+    for (i, (predicate, f)) in cases.iter().enumerate() {
+        let out = dir.path().join(format!("ply{i}"));
+        export(&ds, "ply", &out, &["--where", predicate]);
+        assert_eq!(exported_keys(&out), keys(rows.iter().filter(|r| f(r))), "ply --where {predicate}");
+        let out = dir.path().join(format!("official{i}"));
+        export(&ds, "pointreggpt", &out, &["--where", predicate]);
+        let want = keys(rows.iter().filter(|r| f(r) && r.status == Status::Ok));
+        assert_eq!(exported_keys(&out), want, "pointreggpt --where {predicate}");
+        let scenes = std::fs::read_dir(out.join("data")).map(|d| d.count()).unwrap_or(0);
+        assert_eq!(scenes, want.len());
+    }
+    for limit in [0usize, 1, 3, 100] {
+        let out = dir.path().join(format!("limit{limit}"));
+        let line = export(&ds, "geotransformer", &out, &["--limit", &limit.to_string()]);
+        let want = keys(rows.iter().filter(|r| r.status == Status::Ok).take(limit));
+        assert_eq!(exported_keys(&out), want, "--limit {limit}");
+        assert!(line.contains(&format!("wrote {} pairs", want.len())), "{line}");
+    }
+}
+
+#[test]
+fn a_bad_where_fails_naming_the_column_or_the_token() {
+    let dir = tempfile::tempdir().unwrap();
+    let (ds, _) = build(dir.path());
+    let ds = ds.to_str().unwrap();
+    let out = dir.path().join("x");
+    let out = out.to_str().unwrap();
+    for (predicate, needle) in [
+        ("overlap >= 0.3", "unknown column `overlap`"),
+        ("status = 'ok' and scen = 'a'", "unknown column `scen`"),
+        ("status = ok", "compares with a quoted text"),
+        ("overlap_source >= 'high'", "compares with a number"),
+        ("overlap_source >= 0.3 and", "unexpected end"),
+        ("overlap_source ~ 0.3", "unexpected character `~`"),
+    ] {
+        for command in ["export", "preview", "stats"] {
+            let mut args = vec![command, ds, "--out", out, "--where", predicate];
+            if command == "export" {
+                args.extend(["--format", "ply"]);
+            }
+            let (ok, _, stderr) = run(&args);
+            assert!(!ok, "{command} --where {predicate} should fail");
+            assert!(stderr.contains("--where") && stderr.contains(needle), "{command} --where {predicate}: {stderr}");
+        }
+    }
+    assert!(!Path::new(out).exists(), "nothing is written when the predicate is bad");
+    // An export never mixes with an old one.
+    export(Path::new(ds), "ply", Path::new(out), &["--limit", "1"]);
+    let (ok, _, stderr) = run(&["export", ds, "--format", "ply", "--out", out]);
+    assert!(!ok && stderr.contains("not empty"), "{stderr}");
+}
+
+/// Width, height and colour type of a PNG file.
+fn png_info(path: &Path) -> (u32, u32, png::ColorType) {
+    let dec = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap()));
+    let mut reader = dec.read_info().unwrap();
+    let mut buf = vec![0u8; reader.output_buffer_size().unwrap()];
+    let frame = reader.next_frame(&mut buf).unwrap();
+    (frame.width, frame.height, frame.color_type)
+}
+
+#[test]
+fn previews_decode_with_the_expected_size_and_names() {
+    let dir = tempfile::tempdir().unwrap();
+    let (ds, rows) = build(dir.path());
+    let out = dir.path().join("pv");
+    let (ok, stdout, stderr) = run(&["preview", ds.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    assert!(ok, "{stderr}");
+    assert!(stdout.contains("wrote 8 preview PNGs"), "{stdout}");
+    let (w, h) = montage_size(rows[0].width, rows[0].height);
+    for r in &rows {
+        let path = out.join(format!("{}.png", r.pair_key.replace(['/', '#'], "_")));
+        assert_eq!(png_info(&path), (w, h, png::ColorType::Rgb), "{}", path.display());
+    }
+    let out = dir.path().join("pv2");
+    let (ok, _, stderr) = run(&["preview", ds.to_str().unwrap(), "--out", out.to_str().unwrap(), "--where", "status != 'ok'", "--limit", "1"]);
+    assert!(ok, "{stderr}");
+    let files: Vec<_> = std::fs::read_dir(&out).unwrap().map(|e| e.unwrap().file_name().into_string().unwrap()).collect();
+    let first_rejected = rows.iter().find(|r| r.status != Status::Ok).unwrap();
+    assert_eq!(files, vec![format!("{}.png", first_rejected.pair_key.replace(['/', '#'], "_"))]);
+}
+
+#[test]
+fn stats_counts_equal_the_rows_by_status_and_bins() {
+    let dir = tempfile::tempdir().unwrap();
+    let (ds, rows) = build(dir.path());
+    let out = dir.path().join("st");
+    let (ok, stdout, stderr) = run(&["stats", ds.to_str().unwrap(), "--out", out.to_str().unwrap(), "--per-scene"]);
+    assert!(ok, "{stderr}");
+    let text = std::fs::read_to_string(out.join("stats.txt")).unwrap();
+    assert!(stdout.starts_with(&text), "stdout repeats stats.txt");
+    let value = |label: &str, col: usize| -> u64 {
+        let line = text.lines().find(|l| l.split_whitespace().next() == Some(label) || l.starts_with(label)).unwrap_or_else(|| panic!("no line {label}"));
+        line[label.len()..].split_whitespace().nth(col).unwrap().parse().unwrap()
+    };
+    for st in STATUSES {
+        let n = rows.iter().filter(|r| r.status == st).count() as u64;
+        assert_eq!(value(st.as_str(), 0), n, "{}", st.as_str());
+    }
+    assert_eq!(value("total", 0), rows.len() as u64);
+    for b in 0..10 {
+        let label = format!("[{:.1}, {:.1}{}", b as f64 / 10.0, (b + 1) as f64 / 10.0, if b == 9 { "]" } else { ")" });
+        let ok = rows.iter().filter(|r| r.status == Status::Ok);
+        assert_eq!(value(&label, 0), ok.clone().filter(|r| overlap_bin(r.overlap_source) == b).count() as u64, "{label}");
+        assert_eq!(value(&label, 1), ok.filter(|r| overlap_bin(r.overlap_target) == b).count() as u64, "{label}");
+    }
+    for scene in ["synthetic-0", "synthetic-1"] {
+        let line = text.lines().find(|l| l.starts_with(scene)).unwrap();
+        let counts: Vec<u64> = line.split_whitespace().skip(1).map(|v| v.parse().unwrap()).collect();
+        let want: Vec<u64> = STATUSES.iter().map(|s| rows.iter().filter(|r| r.scene == scene && r.status == *s).count() as u64).collect();
+        assert_eq!(counts[..4], want[..], "{scene}");
+    }
+    assert_eq!(png_info(&out.join("stats.png")), (PLOT_SIZE.0, PLOT_SIZE.1, png::ColorType::Rgb));
+}
+
+#[test]
+fn pair_dataset_py_reads_only_the_committed_shards() {
+    let dir = tempfile::tempdir().unwrap();
+    let (ds, rows) = build(dir.path());
+    // A shard file without a manifest entry is not part of the dataset.
+    std::fs::copy(ds.join("shards/pairs-000000.parquet"), ds.join("shards/pairs-000099.parquet")).unwrap();
+    let f = |p: &pointreggpt::geometry::Point| vec![p.x as f64, p.y as f64, p.z as f64];
+    let sum = |c: &[pointreggpt::geometry::Point]| c.iter().fold([0.0f64; 3], |a, p| [a[0] + p.x as f64, a[1] + p.y as f64, a[2] + p.z as f64]);
+    let expected: Vec<serde_json::Value> = rows
+        .iter()
+        .filter(|r| r.status == Status::Ok)
+        .map(|r| {
+            json!({
+                "pair_key": r.pair_key, "unit_index": r.unit_index,
+                "n_source": r.source_points.len(), "n_target": r.target_points.len(), "t": r.t_target_from_source.to_vec(),
+                "source_first": f(&r.source_points[0]), "source_last": f(r.source_points.last().unwrap()),
+                "target_first": f(&r.target_points[0]), "target_last": f(r.target_points.last().unwrap()),
+                "source_sum": sum(&r.source_points), "target_sum": sum(&r.target_points),
+            })
+        })
+        .collect();
+    let path = dir.path().join("expected.json");
+    std::fs::write(&path, serde_json::Value::Array(expected.clone()).to_string()).unwrap();
+    let o = std::process::Command::new(python()).arg(script("pair_dataset.py")).arg(&ds).arg(&path).output().unwrap();
+    assert!(o.status.success(), "pair_dataset.py failed (numpy and pyarrow are required: scripts/install-test-deps.sh):\n{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["pairs"], expected.len());
+    assert_eq!(v["files"], 2);
+}
