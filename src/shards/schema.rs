@@ -176,7 +176,7 @@ mod tests {
             let cells: Vec<String> =
                 line.trim_matches('|').split('|').map(|c| c.trim().trim_matches('`').to_string()).collect();
             if !in_table {
-                assert_eq!(cells[..3], ["column", "type", "nullable"], "table header of schemas/pairs-v1.md");
+                assert_eq!(cells[..3], ["column", "type", "nullable"], "table header of a schemas/*.md file");
                 in_table = true;
                 continue;
             }
@@ -188,16 +188,12 @@ mod tests {
         rows
     }
 
-    #[test]
-    fn markdown_schema_matches_code() {
-        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/schemas/pairs-v1.md");
-        let text = std::fs::read_to_string(path).expect("schemas/pairs-v1.md");
-        assert!(
-            text.contains(&format!("`{SCHEMA_VERSION}`")),
-            "the markdown names the schema version {SCHEMA_VERSION}"
-        );
+    /// Checks the table of `schemas/<file>` against `schema`: names, order, types and nullability.
+    fn check_markdown(file: &str, version: &str, schema: &SchemaRef) {
+        let path = format!("{}/schemas/{file}", env!("CARGO_MANIFEST_DIR"));
+        let text = std::fs::read_to_string(&path).expect("schema markdown");
+        assert!(text.contains(&format!("`{version}`")), "{file} names the schema version {version}");
         let doc = markdown_columns(&text);
-        let schema = pairs_schema();
         let code: Vec<(String, String, String)> = schema
             .fields()
             .iter()
@@ -207,9 +203,19 @@ mod tests {
             })
             .collect();
         for (i, (d, c)) in doc.iter().zip(&code).enumerate() {
-            assert_eq!(d, c, "row {i} of the table in schemas/pairs-v1.md differs from the code schema");
+            assert_eq!(d, c, "row {i} of the table in schemas/{file} differs from the code schema");
         }
-        assert_eq!(doc.len(), code.len(), "column count of schemas/pairs-v1.md vs the code schema");
+        assert_eq!(doc.len(), code.len(), "column count of schemas/{file} vs the code schema");
+    }
+
+    #[test]
+    fn markdown_schema_matches_code() {
+        check_markdown("pairs-v1.md", SCHEMA_VERSION, &pairs_schema());
+        check_markdown(
+            "labels-v1.md",
+            crate::shards::labels::LABELS_SCHEMA_VERSION,
+            &crate::shards::labels::labels_schema(),
+        );
     }
 
     #[test]
