@@ -20,6 +20,8 @@ pub struct Cli {
 pub enum Command {
     /// Build a dataset of registration pairs from a pipeline config (resumable, shardable).
     Build(commands::build::BuildArgs),
+    /// Fuse consecutive frames of a sequence (TSDF) and write the surface cloud and mesh as PLY.
+    Fuse(commands::fuse::FuseArgs),
     /// Build depth-correction training labels by TSDF fusion of sequences (resumable, shardable).
     Labels(commands::labels::LabelsArgs),
     /// Render a synthetic indoor scene, re-project one frame into a sampled pose, and write the two
@@ -55,6 +57,7 @@ impl Cli {
         match &self.command {
             Command::Build(a) => commands::build::run(a, out),
             Command::Demo(a) => commands::demo::run(a, out),
+            Command::Fuse(a) => commands::fuse::run(a, out),
             Command::Labels(a) => commands::labels::run(a, out),
             Command::Synth(a) => commands::synth::run(a, out),
             Command::Inspect(a) => commands::inspect::run(a, out),

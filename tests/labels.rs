@@ -139,3 +139,36 @@ fn labels_agree_with_the_exact_penetration_mask() {
     assert!(union > 500, "the sampled views must show penetration ({union} pixels)");
     assert!(iou >= 0.9, "IoU {iou:.3}");
 }
+
+#[test]
+fn fuse_command_writes_a_cloud_on_the_true_surface_and_a_mesh() {
+    let dir = tempfile::tempdir().unwrap();
+    let seq = SyntheticSequence::generate(&SyntheticConfig { frames: 10, ..Default::default() }, 8).unwrap();
+    seq.write_3dmatch(&dir.path().join("seq")).unwrap();
+    let o = support::bin()
+        .args(["fuse"])
+        .arg(dir.path().join("seq"))
+        .args(["--frames", "10", "--voxel", "0.01", "--truncation", "0.04", "--out"])
+        .arg(dir.path().join("fused"))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let points = pointreggpt::sources::ply::read_ply(&dir.path().join("fused/fused.cloud.ply")).unwrap();
+    assert!(points.len() > 10_000);
+    assert!(String::from_utf8_lossy(&o.stdout).contains(&format!("{} surface points", points.len())));
+    // The cloud is in frame 0's camera coordinates: move it to the world and measure the distance to the scene.
+    let world = pointreggpt::geometry::transform_points(&points, &seq.poses[0]);
+    let mut d: Vec<f64> = world
+        .iter()
+        .step_by(50)
+        .map(|p| {
+            let q = nalgebra::Point3::new(p.x as f64, p.y as f64, p.z as f64);
+            seq.scene.shapes().iter().map(|s| s.signed_distance(&q).abs()).fold(f64::INFINITY, f64::min)
+        })
+        .collect();
+    d.sort_by(f64::total_cmp);
+    assert!(d[d.len() / 2] < 0.005, "median distance to the true surface {}", d[d.len() / 2]);
+    let mesh = std::fs::read(dir.path().join("fused/fused.mesh.ply")).unwrap();
+    let header = String::from_utf8_lossy(&mesh[..300.min(mesh.len())]).to_string();
+    assert!(header.contains("element face") && header.contains("element vertex"), "{header}");
+}

@@ -2,6 +2,7 @@
 
 pub mod build;
 pub mod demo;
+pub mod fuse;
 pub mod export;
 pub mod inspect;
 pub mod labels;

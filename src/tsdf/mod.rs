@@ -9,7 +9,8 @@
 //! `(i + ½)·s`. Every result is the same bit for bit whatever the rayon thread count.
 //!
 //! Files: [`config`] (parameters), [`volume`] (hashed blocks), `integrate` (projective update),
-//! `extract` (points), `marching_cubes` with its lookup tables in [`tables`], `raycast`, [`mesh`]
+//! `extract` (points), `marching_cubes` with its lookup tables in [`tables`], `raycast` with its
+//! lookups in `sample`, [`mesh`]
 //! (mesh type and PLY writer), and the fusion helpers below.
 
 pub mod config;
@@ -18,6 +19,7 @@ mod integrate;
 mod marching_cubes;
 pub mod mesh;
 mod raycast;
+mod sample;
 pub mod tables;
 pub mod volume;
 

@@ -188,18 +188,19 @@ mod tests {
                 let (a, b, cc) = (dir.norm_squared(), -2.0 * dir.dot(&c.coords), c.coords.norm_squared() - r * r);
                 let disc = b * b - 4.0 * a * cc;
                 let got = depth.at(col, row);
-                if disc < 0.0 {
+                if disc < -0.02 * b * b {
                     assert_eq!(got, 0.0, "pixel ({col}, {row}) misses the sphere");
-                    continue;
                 }
-                let z = (-b - disc.sqrt()) / (2.0 * a);
-                if disc > 0.05 * b * b * 0.01 && got > 0.0 {
+                // Away from the silhouette, where a voxel of error moves the hit a long way.
+                if disc > 0.02 * b * b {
+                    assert!(got > 0.0, "pixel ({col}, {row}) sees the sphere");
+                    let z = (-b - disc.sqrt()) / (2.0 * a);
                     hits += 1;
                     worst = worst.max((got - z).abs());
                 }
             }
         }
-        assert!(hits > 5000, "{hits}");
+        assert!(hits > 2000, "{hits}");
         assert!(worst < 1e-3, "worst |Δz| {worst} m");
     }
 }
