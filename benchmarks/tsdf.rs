@@ -20,7 +20,7 @@ fn main() {
             let em = t.elapsed().as_secs_f64() * 1e3;
             let t = Instant::now();
             let r = v.raycast(&frames[25].intrinsics, &frames[25].t_world_from_camera.unwrap()).unwrap();
-            let rc = t.elapsed().as_secs_f64() * 1e3;
+            let rc = t.elapsed().as_secs_f64() * 1e3; println!("{:?}", pointreggpt::tsdf::raycast::raycast_counts());
             println!("voxel {} blocks {} integrate {integ:.2} ms/frame, points {} in {ep:.1} ms, mesh {} tris in {em:.1} ms, raycast {rc:.1} ms ({} px)", cfg.voxel_size_m, v.block_count(), p.len(), m.triangles.len(), r.valid_count());
         }
     }

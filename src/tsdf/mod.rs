@@ -18,7 +18,7 @@ mod extract;
 mod integrate;
 mod marching_cubes;
 pub mod mesh;
-mod raycast;
+pub mod raycast;
 mod sample;
 pub mod tables;
 pub mod volume;

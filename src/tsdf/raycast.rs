@@ -12,6 +12,9 @@ use crate::error::Result;
 use crate::geometry::{DepthMap, Intrinsics};
 use nalgebra::{Isometry3, Vector3};
 use rayon::prelude::*;
+pub static CNT: [std::sync::atomic::AtomicU64; 4] = [const { std::sync::atomic::AtomicU64::new(0) }; 4];
+fn bump(i: usize) { CNT[i].fetch_add(1, std::sync::atomic::Ordering::Relaxed); }
+pub fn raycast_counts() -> [u64; 4] { [0,1,2,3].map(|i| CNT[i].swap(0, std::sync::atomic::Ordering::Relaxed)) }
 
 /// In observed space a ray advances by this fraction of `tsdf · truncation` (at least one voxel).
 const STEP_FRACTION: f32 = 0.8;
@@ -113,6 +116,7 @@ impl TsdfVolume {
         let mut last_step = 0.0f32;
         while z <= z_end {
             if !occ.get(walk.cell) {
+                bump(0);
                 z = z.max(walk.exit());
                 walk.advance();
                 prev = None;
@@ -120,10 +124,12 @@ impl TsdfVolume {
             }
             match s.trilinear(at(z)) {
                 None => {
+                    bump(1);
                     prev = None;
                     last_step = fine;
                 }
                 Some(f) => {
+                    bump(2);
                     if let Some((zp, fp)) = prev.filter(|(_, fp)| *fp > 0.0 && f <= 0.0) {
                         if last_step > 1.01 * fine {
                             // Overshot with a long step: walk the last interval again voxel by voxel.
@@ -142,6 +148,7 @@ impl TsdfVolume {
             z += last_step;
             // Follow the walk to the cell holding z; a skipped empty cell breaks the bracket.
             while walk.exit() <= z {
+                bump(3);
                 walk.advance();
                 if walk.exit() <= z && !occ.get(walk.cell) {
                     prev = None;

@@ -1,0 +1,255 @@
+//! Trust under faults: random SIGKILLs, a full disk, corrupt inputs of every kind, two processes on the
+//! same shards, hostile configs. Each case asserts what it promises (counts, hashes, messages).
+
+mod support;
+
+use pointreggpt::pipeline::{run_build, BuildConfig, BuildOptions};
+use pointreggpt::rng::Rng;
+use pointreggpt::runtime::CancelToken;
+use pointreggpt::shards::dataset::Dataset;
+use pointreggpt::shards::row::Status;
+use pointreggpt::sources::synthetic::{SyntheticConfig, SyntheticSequence};
+use pointreggpt::sources::{depth_png, text};
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::process::{Command, Stdio};
+use std::time::Duration;
+use support::{bin, synthetic_config};
+
+fn digests(dataset: &Path, table: &str) -> BTreeMap<(u64, u32), String> {
+    let ds = Dataset::open(dataset).unwrap();
+    if table == "pairs" {
+        return ds.read_pairs().unwrap().iter().map(|r| ((r.unit_index, r.sample_index), r.content_digest().to_hex().to_string())).collect();
+    }
+    let mut out = BTreeMap::new();
+    for e in ds.committed(table).unwrap().values() {
+        for b in ds.read_shard_batches(e).unwrap() {
+            for mut r in pointreggpt::shards::batch_to_labels(&b).unwrap() {
+                r.timings.clear();
+                out.insert((r.unit_index, r.sample_index), format!("{r:?}"));
+            }
+        }
+    }
+    out
+}
+
+fn command(sub: &str, config: &Path, out: &Path, extra: &[&str]) -> Command {
+    let mut c = bin();
+    c.args(["--threads", "2", sub]).arg(config).arg("--out").arg(out).arg("--no-progress").args(extra);
+    c.stdout(Stdio::piped()).stderr(Stdio::piped());
+    c
+}
+
+fn assert_verified(dataset: &Path) {
+    let report = Dataset::open(dataset).unwrap().verify().unwrap();
+    assert!(report.is_ok() && report.orphans.is_empty() && report.stale_temps.is_empty() && report.other_temps.is_empty(), "{report}");
+}
+
+/// Kills `sub` at `kills` random moments, then lets it finish; the result must equal `reference`.
+fn kill_repeatedly(sub: &str, config: &Path, out: &Path, table: &str, kills: usize, max_delay_ms: f64, reference: &BTreeMap<(u64, u32), String>) {
+    let mut rng = Rng::new(2024);
+    for _ in 0..kills {
+        let mut child = command(sub, config, out, &[]).spawn().unwrap();
+        std::thread::sleep(Duration::from_millis(rng.uniform_range(50.0, max_delay_ms) as u64));
+        let _ = child.kill();
+        child.wait().unwrap();
+        if out.join("dataset.toml").exists() {
+            for (k, d) in digests(out, table) {
+                assert_eq!(Some(&d), reference.get(&k), "{sub}: unit {k:?} differs after a kill");
+            }
+        }
+    }
+    let o = command(sub, config, out, &[]).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(&digests(out, table), reference, "{sub}: final dataset differs from the uninterrupted one");
+    assert_verified(out);
+}
+
+#[test]
+fn twenty_random_sigkills_during_a_build_then_a_final_run_equal_an_uninterrupted_build() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("c.toml");
+    std::fs::write(&config, synthetic_config(2, 36, 2, 1, 640, 480, 3)).unwrap();
+    let reference_dir = dir.path().join("ref");
+    let o = command("build", &config, &reference_dir, &[]).output().unwrap();
+    assert!(o.status.success());
+    let reference = digests(&reference_dir, "pairs");
+    assert_eq!(reference.len(), 36);
+    kill_repeatedly("build", &config, &dir.path().join("killed"), "pairs", 20, 1500.0, &reference);
+}
+
+#[test]
+fn ten_random_sigkills_during_labels_then_a_final_run_equal_an_uninterrupted_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("l.toml");
+    std::fs::write(
+        &config,
+        "seed = 2\nsamples_per_window = 2\nshard_size = 1\n[source]\nkind = \"synthetic\"\nscenes = 1\n\
+         [source.synthetic]\nframes = 40\n[source.synthetic.intrinsics]\nfx = 292.5\nfy = 292.5\ncx = 160.0\ncy = 120.0\nwidth = 320\nheight = 240\n\
+         [window]\nframes = 8\nstride = 8\n[tsdf]\nvoxel_size_m = 0.02\ntruncation_m = 0.08\n",
+    )
+    .unwrap();
+    let reference_dir = dir.path().join("ref");
+    let o = command("labels", &config, &reference_dir, &[]).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let reference = digests(&reference_dir, "labels");
+    assert_eq!(reference.len(), 10, "5 windows x 2 samples");
+    kill_repeatedly("labels", &config, &dir.path().join("killed"), "labels", 10, 1500.0, &reference);
+}
+
+#[test]
+fn a_full_disk_stops_the_build_clearly_keeps_committed_shards_and_the_rerun_completes() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("c.toml");
+    std::fs::write(&config, synthetic_config(2, 24, 2, 1, 320, 240, 2)).unwrap();
+    let reference_dir = dir.path().join("ref");
+    assert!(command("build", &config, &reference_dir, &[]).status().unwrap().success());
+    let reference = digests(&reference_dir, "pairs");
+    let total: u64 = std::fs::read_dir(reference_dir.join("shards")).unwrap().map(|e| e.unwrap().metadata().unwrap().len()).sum();
+
+    // A tmpfs about half the dataset's size (root is needed to mount; CI runs as root).
+    let mount = dir.path().join("small-disk");
+    std::fs::create_dir_all(&mount).unwrap();
+    let size = format!("size={}k", (total / 2 / 1024).max(64));
+    let ok = Command::new("mount").args(["-t", "tmpfs", "-o", &size, "tmpfs"]).arg(&mount).status().map(|s| s.success()).unwrap_or(false);
+    assert!(ok, "mounting a small tmpfs failed: this test needs root (CI runs as root)");
+    struct Unmount<'a>(&'a Path);
+    impl Drop for Unmount<'_> {
+        fn drop(&mut self) {
+            let _ = Command::new("umount").arg(self.0).status();
+        }
+    }
+    let _guard = Unmount(&mount);
+    let out = mount.join("ds");
+    let o = command("build", &config, &out, &[]).output().unwrap();
+    assert!(!o.status.success(), "the build cannot fit on the small disk");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("No space left on device") && err.contains(&*mount.to_string_lossy()), "{err}");
+    let partial = digests(&out, "pairs");
+    assert!(partial.len() < reference.len());
+    assert!(partial.iter().all(|(k, d)| reference.get(k) == Some(d)), "committed shards are intact");
+    let report = Dataset::open(&out).unwrap().verify().unwrap();
+    assert!(report.is_ok(), "{report}");
+
+    // Free space (grow the tmpfs) and resume.
+    assert!(Command::new("mount").args(["-o", "remount,size=256m"]).arg(&mount).status().unwrap().success());
+    let o = command("build", &config, &out, &[]).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(digests(&out, "pairs"), reference);
+    assert_verified(&out);
+}
+
+#[test]
+fn corrupt_inputs_of_every_kind_become_input_error_rows_naming_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("seq");
+    let seq = SyntheticSequence::generate(&SyntheticConfig { frames: 9, ..Default::default() }, 5).unwrap();
+    seq.write_3dmatch(&data).unwrap();
+    let f = |i: usize, ext: &str| data.join(format!("frame-{i:06}.{ext}"));
+    // 1: truncated PNG; 2: 8-bit PNG; 3: NaN pose; 4: non-rigid pose; 5: wrong image size; 6: empty depth;
+    // 7: missing pose; 0 and 8 stay good.
+    let bytes = std::fs::read(f(1, "depth.png")).unwrap();
+    std::fs::write(f(1, "depth.png"), &bytes[..bytes.len() / 4]).unwrap();
+    let mut eight = Vec::new();
+    {
+        let mut e = png::Encoder::new(&mut eight, 640, 480);
+        e.set_color(png::ColorType::Grayscale);
+        e.set_depth(png::BitDepth::Eight);
+        e.write_header().unwrap().write_image_data(&vec![100u8; 640 * 480]).unwrap();
+    }
+    std::fs::write(f(2, "depth.png"), eight).unwrap();
+    std::fs::write(f(3, "pose.txt"), "nan 0 0 0\n0 1 0 0\n0 0 1 0\n0 0 0 1\n").unwrap();
+    std::fs::write(f(4, "pose.txt"), "2 0 0 0\n0 1 0 0\n0 0 1 0\n0 0 0 1\n").unwrap();
+    depth_png::write_depth_png(&f(5, "depth.png"), 320, 240, &vec![1500u16; 320 * 240]).unwrap();
+    depth_png::write_depth_png(&f(6, "depth.png"), 640, 480, &vec![0u16; 640 * 480]).unwrap();
+    std::fs::remove_file(f(7, "pose.txt")).unwrap();
+    let config = dir.path().join("c.toml");
+    std::fs::write(&config, format!("shard_size = 4\n[source]\nkind = \"directory\"\npath = \"{}\"\n", data.display())).unwrap();
+
+    let out = dir.path().join("ds");
+    let o = command("build", &config, &out, &[]).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let rows = Dataset::open(&out).unwrap().read_pairs().unwrap();
+    assert_eq!(rows.len(), 9);
+    let expect: [(usize, &str, &str); 7] = [
+        (1, "depth.png", "truncated"),
+        (2, "depth.png", "16-bit"),
+        (3, "pose.txt", "non-finite"),
+        (4, "pose.txt", "not rigid"),
+        (5, "depth.png", "320x240"),
+        (6, "depth.png", "no valid pixel"),
+        (7, "depth.png", "no camera pose"),
+    ];
+    for (i, file, what) in expect {
+        let r = &rows[i];
+        assert_eq!(r.status, Status::InputError, "frame {i}: {}", r.message);
+        assert!(r.message.contains(&format!("frame-{i:06}.{file}")) && r.message.contains(what), "frame {i}: {}", r.message);
+    }
+    assert!(rows[0].status != Status::InputError && rows[8].status != Status::InputError);
+
+    // --strict stops at the first one, naming it; nothing of its shard is committed.
+    let o = command("build", &config, &dir.path().join("strict"), &["--strict"]).output().unwrap();
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("frame-000001.depth.png"));
+
+    // Missing intrinsics: refused before any work, naming the folder.
+    std::fs::remove_file(data.join("camera-intrinsics.txt")).unwrap();
+    let o = command("build", &config, &dir.path().join("nok"), &[]).output().unwrap();
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("camera-intrinsics.txt") && err.contains(&*data.to_string_lossy()), "{err}");
+    assert!(!dir.path().join("nok").exists());
+    let _ = text::read_numbers; // (the pose text files above are parsed by sources::text)
+}
+
+#[test]
+fn two_processes_claiming_the_same_shards_give_one_result_and_no_torn_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("c.toml");
+    let text = synthetic_config(2, 24, 2, 1, 320, 240, 3);
+    std::fs::write(&config, &text).unwrap();
+    let cfg = BuildConfig::from_toml(&text, "t").unwrap();
+    let reference_dir = dir.path().join("ref");
+    run_build(&cfg, &BuildOptions { out: reference_dir.clone(), worker: 0, workers: 1, strict: false, progress: false }, &CancelToken::new()).unwrap();
+    let reference = digests(&reference_dir, "pairs");
+    let out = dir.path().join("same");
+    // Both think they are worker 0 of 1: every shard is claimed twice.
+    let a = command("build", &config, &out, &[]).spawn().unwrap();
+    let b = command("build", &config, &out, &[]).spawn().unwrap();
+    for c in [a, b] {
+        let o = c.wait_with_output().unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+    assert_eq!(digests(&out, "pairs"), reference);
+    assert_verified(&out);
+    let files = std::fs::read_dir(out.join("shards")).unwrap().count();
+    assert_eq!(files, 8, "one file per shard");
+}
+
+#[test]
+fn hostile_configs_are_refused_naming_the_field_before_any_work() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("c.toml");
+    std::fs::write(&config, synthetic_config(1, 6, 3, 1, 320, 240, 2)).unwrap();
+    let cases: [(&str, &str); 9] = [
+        ("voxelize.voxle=0.1", "voxle"),
+        ("voxelize.voxel=-0.025", "voxelize.voxel"),
+        ("working.size=1000000", "working.size"),
+        ("samples_per_frame=0", "samples_per_frame"),
+        ("shard_size=0", "shard_size"),
+        ("source.scenes=100000000", "source.scenes"),
+        ("validate.radius=-1", "validate.radius"),
+        ("working.depth_range=[5.0, 1.0]", "working.depth_range"),
+        ("pose.max_yaw_deg=720", "pose.max_yaw_deg"),
+    ];
+    for (i, (set, field)) in cases.iter().enumerate() {
+        let out = dir.path().join(format!("x{i}"));
+        let o = command("build", &config, &out, &["--set", set]).output().unwrap();
+        assert!(!o.status.success(), "{set} was accepted");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(err.contains(field), "{set}: {err}");
+        assert!(!out.exists(), "{set}: work started");
+    }
+    let o = command("labels", &config, &dir.path().join("l"), &[]).output().unwrap();
+    assert!(!o.status.success(), "a build config is not a label config");
+}
