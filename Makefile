@@ -27,6 +27,8 @@ build: libtorch
 
 demo: libtorch
 	$(CARGO) run --release -- build pipelines/demo.toml --out out/demo
+	$(CARGO) run --release -- preview out/demo --out out/demo-preview --limit 4 --no-progress
+	$(CARGO) run --release -- stats out/demo --out out/demo-stats --no-progress
 
 # Python peers the tests read shards with (pyarrow, DuckDB), from PyPI, once.
 test-deps:
