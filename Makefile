@@ -14,7 +14,7 @@ all: build
 help:
 	@echo "make demo        build 240 registration pairs from embedded synthetic scenes into out/demo"
 	@echo "make test        run every test (release build; real-data tests use POINTREGGPT_REAL_DATA)"
-	@echo "make bench       run the benchmarks against their Python peers (installs the peers from PyPI)"
+	@echo "make bench       run every benchmark against its peers and write benchmarks/REPORT.md"
 	@echo "make libtorch    assemble CPU libtorch 2.13.0 from PyPI wheels into third_party/libtorch"
 
 # libtorch from PyPI wheels (idempotent). Skipped when the user points the build elsewhere.
@@ -40,8 +40,9 @@ test: libtorch test-deps
 bench-deps:
 	./scripts/install-bench-peers.sh
 
-bench: libtorch bench-deps
-	$(CARGO) bench --bench geometry
+# Every benchmark and its peers in one run; writes benchmarks/REPORT.md.
+bench: libtorch bench-deps test-deps
+	./scripts/bench-report.sh
 
 clean-libtorch:
 	rm -rf third_party/libtorch

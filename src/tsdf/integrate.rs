@@ -177,6 +177,15 @@ impl TsdfVolume {
             .map(|(task, rows)| {
                 let mut cache = [u64::MAX; CACHE_SLOTS];
                 let mut out = Vec::new();
+                let mut push = |cell: [i32; 3]| {
+                    let key = pack(cell);
+                    let slot = (key.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 54) as usize % CACHE_SLOTS;
+                    if cache[slot] != key {
+                        cache[slot] = key;
+                        out.push(key);
+                    }
+                };
+                let mut last = [[i32::MIN; 3]; 2];
                 for (i, row) in rows.chunks(w).enumerate() {
                     let yn = (((task * ROWS_PER_TASK + i) as f64 - k.cy) / k.fy) as f32;
                     let base = [0, 1, 2].map(|a| ry[a] * yn + rz[a]);
@@ -186,16 +195,20 @@ impl TsdfVolume {
                         }
                         let ray = [0, 1, 2].map(|a| base[a] + rx[a] * x);
                         let (z0, z1) = ((d - trunc).max(0.0), d + trunc);
-                        let a = [0, 1, 2].map(|i| o[i] + z0 * ray[i]);
-                        let b = [0, 1, 2].map(|i| o[i] + z1 * ray[i]);
-                        traverse(a, b, |cell| {
-                            let key = pack(cell);
-                            let slot = (key.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 54) as usize % CACHE_SLOTS;
-                            if cache[slot] != key {
-                                cache[slot] = key;
-                                out.push(key);
+                        let a = [0, 1, 2].map(|i| floor_i32(o[i] + z0 * ray[i]));
+                        let b = [0, 1, 2].map(|i| floor_i32(o[i] + z1 * ray[i]));
+                        if [a, b] == last {
+                            continue;
+                        }
+                        last = [a, b];
+                        let (lo, hi) = (std::array::from_fn::<i32, 3, _>(|i| a[i].min(b[i])), std::array::from_fn::<i32, 3, _>(|i| a[i].max(b[i])));
+                        for z in lo[2]..=hi[2] {
+                            for y in lo[1]..=hi[1] {
+                                for x in lo[0]..=hi[0] {
+                                    push([x, y, z]);
+                                }
                             }
-                        });
+                        }
                     }
                 }
                 out
