@@ -14,6 +14,13 @@ An interrupted build resumes where it stopped when run again with the same confi
 pub struct BuildArgs {
     /// Pipeline config (TOML), for example pipelines/demo.toml.
     pub config: PathBuf,
+    #[command(flatten)]
+    pub run: RunArgs,
+}
+
+/// The flags `build` and `labels` share: where the dataset goes, overrides, the worker split.
+#[derive(Debug, clap::Args)]
+pub struct RunArgs {
     /// Dataset folder; created, or resumed when it holds a dataset with the same config.
     /// Default: out/<config file stem>.
     #[arg(long)]
@@ -37,6 +44,15 @@ pub struct BuildArgs {
     /// Print the resolved config (every default filled in) and exit.
     #[arg(long)]
     pub print_config: bool,
+}
+
+impl RunArgs {
+    /// The run options for `config` (the dataset folder defaults to out/<config file stem>).
+    pub fn options(&self, config: &Path) -> Result<BuildOptions> {
+        let (worker, workers) = worker_from_env(self.worker, self.workers)?;
+        let out = self.out.clone().unwrap_or_else(|| PathBuf::from("out").join(config.file_stem().unwrap_or_default()));
+        Ok(BuildOptions { out, worker, workers, strict: self.strict, progress: !self.no_progress })
+    }
 }
 
 /// Reads a pipeline config file of any kind and applies `--set` overrides.
@@ -80,16 +96,13 @@ pub fn worker_from_env(worker: Option<u64>, workers: Option<u64>) -> Result<(u64
 
 pub fn run(args: &BuildArgs, out: &mut dyn Write) -> Result<()> {
     let w = |e: std::io::Error| Error::io("<stdout>", e);
-    let config = load_config(&args.config, &args.set)?;
-    if args.print_config {
+    let config = load_config(&args.config, &args.run.set)?;
+    if args.run.print_config {
         write!(out, "{}", config.to_toml()).map_err(w)?;
         return Ok(());
     }
-    let (worker, workers) = worker_from_env(args.worker, args.workers)?;
-    let dataset = args.out.clone().unwrap_or_else(|| {
-        PathBuf::from("out").join(args.config.file_stem().unwrap_or_default())
-    });
-    let opts = BuildOptions { out: dataset.clone(), worker, workers, strict: args.strict, progress: !args.no_progress };
+    let opts = args.run.options(&args.config)?;
+    let (dataset, worker, workers) = (opts.out.clone(), opts.worker, opts.workers);
     let cancel = CancelToken::new();
     cancel.cancel_on_signals();
     let r = run_build(&config, &opts, &cancel)?;

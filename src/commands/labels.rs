@@ -1,9 +1,8 @@
 //! `pointreggpt labels`: build correction-network training labels by TSDF fusion of real sequences.
 
-use super::build::{load_toml, worker_from_env};
+use super::build::{load_toml, RunArgs};
 use crate::error::{Error, Result};
 use crate::labels::{run_labels, LabelsConfig};
-use crate::pipeline::BuildOptions;
 use crate::runtime::CancelToken;
 use std::io::Write;
 use std::path::PathBuf;
@@ -15,40 +14,20 @@ labelled M_gt = |I_s - I_d| < tau_gt. Resumable and shardable exactly like `buil
 pub struct LabelsArgs {
     /// Label pipeline config (TOML), for example pipelines/labels-demo.toml.
     pub config: PathBuf,
-    /// Dataset folder (default out/<config file stem>).
-    #[arg(long)]
-    pub out: Option<PathBuf>,
-    /// Override a config value (repeatable), e.g. --set window.frames=30.
-    #[arg(long = "set", value_name = "KEY=VALUE")]
-    pub set: Vec<String>,
-    /// This worker's index (default from the scheduler's environment, as `build`).
-    #[arg(long)]
-    pub worker: Option<u64>,
-    /// Number of workers.
-    #[arg(long)]
-    pub workers: Option<u64>,
-    /// Stop at the first bad input instead of recording an `input_error` row.
-    #[arg(long)]
-    pub strict: bool,
-    /// No progress bars.
-    #[arg(long)]
-    pub no_progress: bool,
-    /// Print the resolved config and exit.
-    #[arg(long)]
-    pub print_config: bool,
+    #[command(flatten)]
+    pub run: RunArgs,
 }
 
 pub fn run(args: &LabelsArgs, out: &mut dyn Write) -> Result<()> {
     let w = |e: std::io::Error| Error::io("<stdout>", e);
-    let config: LabelsConfig = load_toml(&args.config, &args.set)?;
+    let config: LabelsConfig = load_toml(&args.config, &args.run.set)?;
     config.validate()?;
-    if args.print_config {
+    if args.run.print_config {
         write!(out, "{}", config.to_toml()).map_err(w)?;
         return Ok(());
     }
-    let (worker, workers) = worker_from_env(args.worker, args.workers)?;
-    let dataset = args.out.clone().unwrap_or_else(|| PathBuf::from("out").join(args.config.file_stem().unwrap_or_default()));
-    let opts = BuildOptions { out: dataset.clone(), worker, workers, strict: args.strict, progress: !args.no_progress };
+    let opts = args.run.options(&args.config)?;
+    let (dataset, worker, workers) = (opts.out.clone(), opts.worker, opts.workers);
     let cancel = CancelToken::new();
     cancel.cancel_on_signals();
     let r = run_labels(&config, &opts, &cancel)?;

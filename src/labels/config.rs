@@ -149,7 +149,13 @@ impl LabelsConfig {
             return bad("tau_gt", "must be a positive number of metres");
         }
         // The working, pose and source sections follow the build's rules.
-        let as_build = crate::pipeline::BuildConfig {
+        self.as_build_config().validate()
+    }
+
+    /// The source, working and pose sections as a build config (every frame selected), to reuse the
+    /// build's frame catalog and checks.
+    pub fn as_build_config(&self) -> crate::pipeline::BuildConfig {
+        crate::pipeline::BuildConfig {
             seed: self.seed,
             samples_per_frame: 1,
             shard_size: 1,
@@ -162,7 +168,6 @@ impl LabelsConfig {
             voxelize: Default::default(),
             validate: Default::default(),
             output: Default::default(),
-        };
-        as_build.validate()
+        }
     }
 }

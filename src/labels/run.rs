@@ -3,15 +3,15 @@
 use super::config::LabelsConfig;
 use super::stages::{Fuse, LabelSink, LabelUnit, SampleAndLabel};
 use super::windows::windows;
-use crate::error::{Error, Result};
-use crate::pipeline::catalog::{shard_count, shard_units};
+use crate::error::Result;
+use crate::pipeline::catalog::{check_worker, plan_shards, shard_count, shard_units};
 use crate::pipeline::BuildOptions;
 use crate::runtime::{run_pipeline, CancelToken, RunSummary, StageSpec};
 use crate::shards::dataset::Dataset;
 use crate::shards::labels::LABELS_TABLE;
 use crate::shards::row::Status;
 use crate::shards::CODE_VERSION;
-use std::collections::{BTreeMap, BTreeSet};
+use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::sync::Arc;
 
@@ -30,9 +30,7 @@ pub struct LabelsReport {
 /// Runs the label pipeline into `opts.out` (resuming what is committed there).
 pub fn run_labels(config: &LabelsConfig, opts: &BuildOptions, cancel: &CancelToken) -> Result<LabelsReport> {
     config.validate()?;
-    if opts.workers == 0 || opts.worker >= opts.workers {
-        return Err(Error::config("--worker", format!("worker index {} must be below the worker count {}", opts.worker, opts.workers)));
-    }
+    check_worker(opts.worker, opts.workers)?;
     let (catalog, windows) = windows(config)?;
     let catalog = Arc::new(catalog);
     let total = windows.len() as u64;
@@ -41,9 +39,7 @@ pub fn run_labels(config: &LabelsConfig, opts: &BuildOptions, cancel: &CancelTok
         .with_worker(format!("{}-of-{}", opts.worker, opts.workers));
     dataset.clean_stale_temps()?;
     let committed = dataset.resumable(LABELS_TABLE)?;
-    let owned: Vec<u64> = (0..total_shards).filter(|k| k % opts.workers == opts.worker).collect();
-    let todo: BTreeSet<u64> = owned.iter().copied().filter(|k| !committed.contains_key(k)).collect();
-    let todo_units: u64 = todo.iter().map(|&k| { let (a, b) = shard_units(k, config.shard_size, total); b - a }).sum();
+    let (owned, todo, todo_units) = plan_shards(total, config.shard_size, opts.worker, opts.workers, &committed);
     let units = {
         let (windows, shard_size, seed) = (windows.clone(), config.shard_size, config.seed);
         todo.clone().into_iter().flat_map(move |k| { let (a, b) = shard_units(k, shard_size, total); a..b }).map(move |u| {

@@ -3,7 +3,6 @@
 use super::config::{LabelsConfig, Reference};
 use crate::error::{Error, Result};
 use crate::pipeline::catalog::Catalog;
-use crate::pipeline::config::SelectConfig;
 
 /// One window: catalog indices of its consecutive frames and of its reference frame.
 #[derive(Clone, Debug)]
@@ -17,21 +16,7 @@ pub struct Window {
 
 /// Every frame of every sequence (no selection), and the windows over them.
 pub fn windows(config: &LabelsConfig) -> Result<(Catalog, Vec<Window>)> {
-    let as_build = crate::pipeline::BuildConfig {
-        seed: config.seed,
-        samples_per_frame: 1,
-        shard_size: 1,
-        source: config.source.clone(),
-        select: SelectConfig::default(),
-        working: config.working.clone(),
-        pose: config.pose.clone(),
-        correct: Default::default(),
-        inpaint: crate::inpainting::InpaintConfig::None,
-        voxelize: Default::default(),
-        validate: Default::default(),
-        output: Default::default(),
-    };
-    let catalog = Catalog::open(&as_build)?;
+    let catalog = Catalog::open(&config.as_build_config())?;
     let mut out = Vec::new();
     let mut start = 0;
     while start < catalog.frames.len() {

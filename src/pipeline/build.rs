@@ -1,8 +1,8 @@
 //! Assembles the stages of a build from its config and runs them over the units this worker owns.
 
-use super::catalog::{shard_count, shard_units, Catalog};
+use super::catalog::{check_worker, plan_shards, shard_count, shard_units, Catalog};
 use super::config::BuildConfig;
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::rng::unit_seed;
 use crate::runtime::{run_pipeline, CancelToken, RunSummary, StageSpec};
 use crate::shards::dataset::Dataset;
@@ -17,7 +17,7 @@ use crate::stages::sink::ShardSink;
 use crate::stages::validate::ValidateOverlap;
 use crate::stages::voxelize::Voxelize;
 use crate::stages::PairUnit;
-use std::collections::{BTreeMap, BTreeSet};
+use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::sync::Arc;
 
@@ -53,9 +53,7 @@ pub struct BuildReport {
 /// Runs the build described by `config` into `opts.out`, resuming whatever is already committed there.
 pub fn run_build(config: &BuildConfig, opts: &BuildOptions, cancel: &CancelToken) -> Result<BuildReport> {
     config.validate()?;
-    if opts.workers == 0 || opts.worker >= opts.workers {
-        return Err(Error::config("--worker", format!("worker index {} must be below the worker count {}", opts.worker, opts.workers)));
-    }
+    check_worker(opts.worker, opts.workers)?;
     let catalog = Arc::new(Catalog::open(config)?);
     let total_units = catalog.units();
     let total_shards = shard_count(config.shard_size, total_units);
@@ -63,9 +61,7 @@ pub fn run_build(config: &BuildConfig, opts: &BuildOptions, cancel: &CancelToken
         .with_worker(format!("{}-of-{}", opts.worker, opts.workers));
     dataset.clean_stale_temps()?;
     let committed = dataset.resumable("pairs")?;
-    let owned: Vec<u64> = (0..total_shards).filter(|k| k % opts.workers == opts.worker).collect();
-    let todo: BTreeSet<u64> = owned.iter().copied().filter(|k| !committed.contains_key(k)).collect();
-    let todo_units: u64 = todo.iter().map(|&k| { let (a, b) = shard_units(k, config.shard_size, total_units); b - a }).sum();
+    let (owned, todo, todo_units) = plan_shards(total_units, config.shard_size, opts.worker, opts.workers, &committed);
 
     let units = {
         let catalog = catalog.clone();

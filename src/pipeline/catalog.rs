@@ -121,6 +121,29 @@ pub fn shard_count(shard_size: u64, total_units: u64) -> u64 {
     total_units.div_ceil(shard_size)
 }
 
+/// The shards a worker owns (`k mod workers == worker`) and, of those, the ones still to do (not in
+/// `committed`), with their unit count.
+pub fn plan_shards(
+    total_units: u64,
+    shard_size: u64,
+    worker: u64,
+    workers: u64,
+    committed: &std::collections::BTreeMap<u64, crate::shards::ManifestEntry>,
+) -> (Vec<u64>, std::collections::BTreeSet<u64>, u64) {
+    let owned: Vec<u64> = (0..shard_count(shard_size, total_units)).filter(|k| k % workers == worker).collect();
+    let todo: std::collections::BTreeSet<u64> = owned.iter().copied().filter(|k| !committed.contains_key(k)).collect();
+    let units = todo.iter().map(|&k| { let (a, b) = shard_units(k, shard_size, total_units); b - a }).sum();
+    (owned, todo, units)
+}
+
+/// Checks `--worker i --workers N`.
+pub fn check_worker(worker: u64, workers: u64) -> crate::Result<()> {
+    if workers == 0 || worker >= workers {
+        return Err(crate::Error::config("--worker", format!("worker index {worker} must be below the worker count {workers}")));
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
