@@ -262,7 +262,6 @@ fn run_peers(x: &Inputs) -> Peers {
     write_inputs(tmp.path(), x);
     let python = std::env::var("PYTHON").ok().filter(|p| !p.is_empty()).unwrap_or_else(|| "python3".into());
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("benchmarks/peers/geometry_peers.py");
-    eprintln!("geometry bench: ours done; running the Python peers ({python} {})", script.display());
     let output = Command::new(&python).arg(&script).arg(tmp.path()).stderr(Stdio::inherit()).output();
     match output {
         Err(e) => Peers { timings: vec![], info: vec![], failure: Some(format!("{python} did not start: {e}")) },

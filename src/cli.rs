@@ -29,6 +29,8 @@ pub enum Command {
     Demo(commands::demo::DemoArgs),
     /// Write a synthetic sequence (depth PNGs, camera-to-world poses, intrinsics) in the 3DMatch layout.
     Synth(commands::synth::SynthArgs),
+    /// Run SQL over a dataset (tables pairs, labels, manifest; committed shards only) with DataFusion.
+    Query(commands::query::QueryArgs),
     /// Check every committed shard of a dataset against its manifest entry (size, blake3, schema, rows).
     Verify(commands::verify::VerifyArgs),
     /// List the sequences and frames found under a folder (3DMatch / 7-Scenes / SUN3D, TUM, ScanNet),
@@ -61,6 +63,7 @@ impl Cli {
             Command::Labels(a) => commands::labels::run(a, out),
             Command::Synth(a) => commands::synth::run(a, out),
             Command::Inspect(a) => commands::inspect::run(a, out),
+            Command::Query(a) => commands::query::run(a, out),
             Command::Verify(a) => commands::verify::run(a, out),
             Command::Export(a) => commands::export::run(a, out),
             Command::Preview(a) => commands::preview::run(a, out),

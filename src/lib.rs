@@ -10,6 +10,7 @@ pub mod geometry;
 pub mod inpainting;
 pub mod labels;
 pub mod pipeline;
+pub mod query;
 pub mod preview;
 pub mod rng;
 pub mod runtime;

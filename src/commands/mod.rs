@@ -8,5 +8,6 @@ pub mod inspect;
 pub mod labels;
 pub mod preview;
 pub mod stats;
+pub mod query;
 pub mod synth;
 pub mod verify;
