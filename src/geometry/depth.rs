@@ -30,6 +30,12 @@ impl DepthMap {
         Ok(DepthMap { width, height, data })
     }
 
+    /// A map whose values the caller already knows are finite and non-negative (projection output).
+    pub(crate) fn from_checked_parts(width: u32, height: u32, data: Vec<f32>) -> Self {
+        debug_assert!(data.len() == width as usize * height as usize && data.iter().all(|v| v.is_finite() && *v >= 0.0));
+        DepthMap { width, height, data }
+    }
+
     /// An all-invalid map.
     pub fn zeros(width: u32, height: u32) -> Self {
         DepthMap { width, height, data: vec![0.0; width as usize * height as usize] }
@@ -137,7 +143,32 @@ impl DepthRange {
 /// Points of the pixels of `depth` whose depth lies in `range`, in the camera frame, in row-major
 /// pixel order: `x = (c − cx)·z/fx`, `y = (r − cy)·z/fy`.
 pub fn backproject(depth: &DepthMap, k: &Intrinsics, range: DepthRange) -> Vec<Point> {
-    backproject_with_pixels(depth, k, range).0
+    assert_eq!((depth.width, depth.height), (k.width, k.height), "depth map and intrinsics sizes differ");
+    let w = depth.width as usize;
+    let ax: Vec<f32> = (0..w).map(|c| ((c as f64 - k.cx) / k.fx) as f32).collect();
+    const ROWS: usize = 32;
+    let blocks: Vec<Vec<Point>> = depth
+        .data
+        .par_chunks(w * ROWS)
+        .enumerate()
+        .map(|(b, block)| {
+            let mut pts = Vec::with_capacity(block.len());
+            for (rr, row) in block.chunks(w).enumerate() {
+                let ay = (((b * ROWS + rr) as f64 - k.cy) / k.fy) as f32;
+                for (c, &z) in row.iter().enumerate() {
+                    if range.contains(z) {
+                        pts.push(Point::new(ax[c] * z, ay * z, z));
+                    }
+                }
+            }
+            pts
+        })
+        .collect();
+    let mut points = Vec::with_capacity(blocks.iter().map(Vec::len).sum());
+    for b in blocks {
+        points.extend_from_slice(&b);
+    }
+    points
 }
 
 /// As [`backproject`], also returning each point's pixel index `r·W + c`.

@@ -34,15 +34,18 @@ pub fn project_zbuffer(
     assert!(points.len() < NO_SOURCE as usize, "too many points for a u32 index");
     let (w, h) = (k.width as usize, k.height as usize);
     let m = t_target_from_source.to_homogeneous();
-    const CHUNK: usize = 16384;
-
-    // Phase 1 (parallel): pixel and packed key (z bits above, point index below) of every point.
-    // Positive finite f32 compare like their bit patterns, so a u64 minimum is a (z, index) minimum.
-    let hits: Vec<Vec<(u32, u64)>> = points
-        .par_chunks(CHUNK)
+    // Each thread takes a contiguous run of points and keeps its own per-pixel minimum of the packed key
+    // (z bits above, point index below: positive finite f32 compare like their bit patterns, so a u64
+    // minimum is a (z, index) minimum); the buffers are then merged by minimum, which does not depend on
+    // how the points were split.
+    let threads = rayon::current_num_threads().max(1);
+    let chunk = points.len().div_ceil(threads).max(16_384);
+    let buffers: Vec<Vec<u64>> = points
+        .par_chunks(chunk)
         .enumerate()
-        .map(|(chunk, pts)| {
-            let mut out = Vec::with_capacity(pts.len());
+        .map(|(c, pts)| {
+            let mut best = vec![u64::MAX; w * h];
+            let base = (c * chunk) as u64;
             for (j, p) in pts.iter().enumerate() {
                 let (x, y, z) = (p.x as f64, p.y as f64, p.z as f64);
                 let zc = m[(2, 0)] * x + m[(2, 1)] * y + m[(2, 2)] * z + m[(2, 3)];
@@ -50,29 +53,30 @@ pub fn project_zbuffer(
                 if !(zf > 0.0 && zf.is_finite()) {
                     continue;
                 }
+                let inv = 1.0 / zc;
                 let xc = m[(0, 0)] * x + m[(0, 1)] * y + m[(0, 2)] * z + m[(0, 3)];
                 let yc = m[(1, 0)] * x + m[(1, 1)] * y + m[(1, 2)] * z + m[(1, 3)];
-                let u = (xc * k.fx / zc + k.cx).round_ties_even();
-                let v = (yc * k.fy / zc + k.cy).round_ties_even();
+                let u = (xc * k.fx * inv + k.cx).round_ties_even();
+                let v = (yc * k.fy * inv + k.cy).round_ties_even();
                 if u >= 0.0 && v >= 0.0 && u < w as f64 && v < h as f64 {
-                    let pixel = v as usize * w + u as usize;
-                    let index = (chunk * CHUNK + j) as u64;
-                    out.push((pixel as u32, ((zf.to_bits() as u64) << 32) | index));
+                    let key = ((zf.to_bits() as u64) << 32) | (base + j as u64);
+                    let b = &mut best[v as usize * w + u as usize];
+                    if key < *b {
+                        *b = key;
+                    }
                 }
             }
-            out
+            best
         })
         .collect();
-
-    // Phase 2 (serial, cheap): per-pixel minimum.
-    let mut best = vec![u64::MAX; w * h];
-    for chunk in &hits {
-        for &(pixel, key) in chunk {
-            let b = &mut best[pixel as usize];
-            if key < *b {
-                *b = key;
+    let mut iter = buffers.into_iter();
+    let mut best = iter.next().unwrap_or_else(|| vec![u64::MAX; w * h]);
+    for other in iter {
+        best.par_chunks_mut(8192).zip(other.par_chunks(8192)).for_each(|(a, b)| {
+            for (x, y) in a.iter_mut().zip(b) {
+                *x = (*x).min(*y);
             }
-        }
+        });
     }
 
     let mut depth = vec![0.0f32; w * h];
@@ -88,7 +92,7 @@ pub fn project_zbuffer(
         }
     }
     Projection {
-        depth: DepthMap::new(k.width, k.height, depth).expect("projected depths are finite and positive"),
+        depth: DepthMap::from_checked_parts(k.width, k.height, depth),
         known,
         source_index: with_source_index.then_some(source),
     }

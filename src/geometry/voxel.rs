@@ -15,75 +15,89 @@ pub fn voxel_downsample(points: &[Point], voxel: f32) -> Vec<Point> {
         return Vec::new();
     }
     let inv = 1.0 / voxel as f64;
-    let cells: Vec<[i64; 3]> = points
-        .par_iter()
-        .map(|p| {
-            [
-                (p.x as f64 * inv).floor() as i64,
-                (p.y as f64 * inv).floor() as i64,
-                (p.z as f64 * inv).floor() as i64,
-            ]
-        })
-        .collect();
-    let (lo, hi) = cells
-        .par_iter()
-        .fold(
-            || ([i64::MAX; 3], [i64::MIN; 3]),
-            |(mut lo, mut hi), c| {
+    let cell = |p: &Point| -> [i64; 3] {
+        [(p.x as f64 * inv).floor() as i64, (p.y as f64 * inv).floor() as i64, (p.z as f64 * inv).floor() as i64]
+    };
+    let empty = || ([i64::MAX; 3], [i64::MIN; 3]);
+    let (lo, hi) = points
+        .par_chunks(16_384)
+        .map(|chunk| {
+            let (mut lo, mut hi) = empty();
+            for p in chunk {
+                let c = cell(p);
                 for a in 0..3 {
                     lo[a] = lo[a].min(c[a]);
                     hi[a] = hi[a].max(c[a]);
                 }
-                (lo, hi)
-            },
-        )
-        .reduce(
-            || ([i64::MAX; 3], [i64::MIN; 3]),
-            |(l1, h1), (l2, h2)| {
-                ([l1[0].min(l2[0]), l1[1].min(l2[1]), l1[2].min(l2[2])], [h1[0].max(h2[0]), h1[1].max(h2[1]), h1[2].max(h2[2])])
-            },
-        );
-    let bits: Vec<u32> = (0..3).map(|a| bits_for((hi[a] - lo[a]) as u64)).collect();
+            }
+            (lo, hi)
+        })
+        .reduce(empty, |(l1, h1), (l2, h2)| {
+            (std::array::from_fn(|a| l1[a].min(l2[a])), std::array::from_fn(|a| h1[a].max(h2[a])))
+        });
+    let bits: [u32; 3] = std::array::from_fn(|a| bits_for((hi[a] - lo[a]) as u64));
     let idx_bits = bits_for(points.len() as u64 - 1).max(1);
     let total = bits[0] + bits[1] + bits[2] + idx_bits;
+    if total > 64 {
+        return downsample_by_sort(points, &cell);
+    }
+    // Key = voxel index packed as (ix, iy, iz) lexicographically, then the point index: sorting the keys
+    // orders voxels and keeps input order inside each voxel.
+    let mut keys: Vec<u64> = points
+        .par_iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let c = cell(p);
+            let v = ((c[0] - lo[0]) as u64) << (bits[1] + bits[2]) | ((c[1] - lo[1]) as u64) << bits[2] | (c[2] - lo[2]) as u64;
+            (v << idx_bits) | i as u64
+        })
+        .collect();
+    radix_sort_high_bits(&mut keys, idx_bits, total);
+    let mask = (1u64 << idx_bits) - 1;
+    let mut out = Vec::new();
+    let (mut current, mut n, mut sum) = (u64::MAX, 0u32, [0.0f64; 3]);
+    for k in keys {
+        let v = k >> idx_bits;
+        if v != current {
+            if n > 0 {
+                out.push(centroid(sum, n));
+            }
+            (current, n, sum) = (v, 0, [0.0; 3]);
+        }
+        let p = &points[(k & mask) as usize];
+        sum[0] += p.x as f64;
+        sum[1] += p.y as f64;
+        sum[2] += p.z as f64;
+        n += 1;
+    }
+    out.push(centroid(sum, n));
+    out
+}
 
-    // Order of point indices by (voxel, index).
-    let order: Vec<u32> = if total <= 64 {
-        let mut keys: Vec<u64> = cells
-            .par_iter()
-            .enumerate()
-            .map(|(i, c)| {
-                let v = ((c[0] - lo[0]) as u64) << (bits[1] + bits[2])
-                    | ((c[1] - lo[1]) as u64) << bits[2]
-                    | (c[2] - lo[2]) as u64;
-                (v << idx_bits) | i as u64
-            })
-            .collect();
-        radix_sort_high_bits(&mut keys, idx_bits, total);
-        let mask = (1u64 << idx_bits) - 1;
-        keys.iter().map(|k| (k & mask) as u32).collect()
-    } else {
-        let mut idx: Vec<u32> = (0..points.len() as u32).collect();
-        idx.par_sort_by_key(|&i| (cells[i as usize], i));
-        idx
-    };
+fn centroid(sum: [f64; 3], n: u32) -> Point {
+    let n = n as f64;
+    Point::new((sum[0] / n) as f32, (sum[1] / n) as f32, (sum[2] / n) as f32)
+}
 
+/// The same result for extents too wide to pack in 64 bits: sort point indices by (voxel, index).
+fn downsample_by_sort(points: &[Point], cell: &(dyn Fn(&Point) -> [i64; 3] + Sync)) -> Vec<Point> {
+    let cells: Vec<[i64; 3]> = points.par_iter().map(cell).collect();
+    let mut order: Vec<u32> = (0..points.len() as u32).collect();
+    order.par_sort_by_key(|&i| (cells[i as usize], i));
     let mut out = Vec::new();
     let mut start = 0;
     while start < order.len() {
-        let cell = cells[order[start] as usize];
-        let mut end = start;
-        let (mut sx, mut sy, mut sz) = (0.0f64, 0.0f64, 0.0f64);
-        while end < order.len() && cells[order[end] as usize] == cell {
-            let p = &points[order[end] as usize];
-            sx += p.x as f64;
-            sy += p.y as f64;
-            sz += p.z as f64;
-            end += 1;
+        let c = cells[order[start] as usize];
+        let (mut n, mut sum) = (0u32, [0.0f64; 3]);
+        while start < order.len() && cells[order[start] as usize] == c {
+            let p = &points[order[start] as usize];
+            sum[0] += p.x as f64;
+            sum[1] += p.y as f64;
+            sum[2] += p.z as f64;
+            n += 1;
+            start += 1;
         }
-        let n = (end - start) as f64;
-        out.push(Point::new((sx / n) as f32, (sy / n) as f32, (sz / n) as f32));
-        start = end;
+        out.push(centroid(sum, n));
     }
     out
 }
