@@ -6,10 +6,9 @@ use nalgebra::{Isometry3, Point3, Vector3};
 use pointreggpt::geometry::{backproject, DepthRange, Intrinsics};
 use pointreggpt::sources::depth_png::read_depth_png;
 use pointreggpt::sources::synthetic::{
-    trajectory, Scene, SceneConfig, Shape, SyntheticConfig, SyntheticSequence, DEFAULT_INTRINSICS,
+    Scene, Shape, SyntheticConfig, SyntheticSequence, DEFAULT_INTRINSICS,
 };
 use pointreggpt::sources::text::{read_intrinsics_file, read_pose_file};
-use std::time::Instant;
 
 /// Distance (m) from `p` to the surface of `s`, written out independently of the library.
 fn surface_distance(s: &Shape, p: &Point3<f64>) -> f64 {
@@ -171,26 +170,4 @@ fn write_3dmatch_reads_back_as_the_served_frames() {
         let pose = loaded.t_world_from_camera.unwrap();
         assert!((pose.to_homogeneous() - seq.poses[i].to_homogeneous()).abs().max() < 1e-12);
     }
-}
-
-#[test]
-fn a_full_frame_renders_quickly() {
-    let scene = Scene::generate(&SceneConfig::default(), 3);
-    let poses = trajectory(&scene, 10, 3);
-    let solids = scene.shapes().iter().filter(|s| s.is_solid()).count();
-    let time = |threads: usize| {
-        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
-        pool.install(|| {
-            scene.render(&DEFAULT_INTRINSICS, &poses[0]);
-            let start = Instant::now();
-            for p in &poses {
-                std::hint::black_box(scene.render(&DEFAULT_INTRINSICS, p));
-            }
-            start.elapsed().as_secs_f64() * 1000.0 / poses.len() as f64
-        })
-    };
-    let (one, two) = (time(1), time(2));
-    eprintln!("640x480 render with {solids} solids: {one:.1} ms per frame on 1 thread, {two:.1} ms on 2");
-    // Generous bound so a loaded machine does not fail the test; typically a few tens of ms.
-    assert!(two < 400.0, "{two} ms per frame");
 }
