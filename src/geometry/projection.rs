@@ -53,11 +53,10 @@ pub fn project_zbuffer(
                 if !(zf > 0.0 && zf.is_finite()) {
                     continue;
                 }
-                let inv = 1.0 / zc;
                 let xc = m[(0, 0)] * x + m[(0, 1)] * y + m[(0, 2)] * z + m[(0, 3)];
                 let yc = m[(1, 0)] * x + m[(1, 1)] * y + m[(1, 2)] * z + m[(1, 3)];
-                let u = (xc * k.fx * inv + k.cx).round_ties_even();
-                let v = (yc * k.fy * inv + k.cy).round_ties_even();
+                let u = (xc * k.fx / zc + k.cx).round_ties_even();
+                let v = (yc * k.fy / zc + k.cy).round_ties_even();
                 if u >= 0.0 && v >= 0.0 && u < w as f64 && v < h as f64 {
                     let key = ((zf.to_bits() as u64) << 32) | (base + j as u64);
                     let b = &mut best[v as usize * w + u as usize];
