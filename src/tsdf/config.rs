@@ -73,10 +73,7 @@ impl TsdfConfig {
         {
             return Err(Error::config(
                 "truncation_m",
-                format!(
-                    "must be between 1 and 64 voxels ({} m), got {} m",
-                    self.voxel_size_m, self.truncation_m
-                ),
+                format!("must be between 1 and 64 voxels ({} m), got {} m", self.voxel_size_m, self.truncation_m),
             ));
         }
         if !(self.min_depth_m.is_finite() && self.min_depth_m >= 0.0) {
@@ -85,7 +82,10 @@ impl TsdfConfig {
         if !(self.max_depth_m.is_finite() && self.max_depth_m > self.min_depth_m && self.max_depth_m <= 1000.0) {
             return Err(Error::config(
                 "max_depth_m",
-                format!("must be above min_depth_m ({}) and at most 1000 m, got {}", self.min_depth_m, self.max_depth_m),
+                format!(
+                    "must be above min_depth_m ({}) and at most 1000 m, got {}",
+                    self.min_depth_m, self.max_depth_m
+                ),
             ));
         }
         if !(1..=32).contains(&self.block_side) {
@@ -105,7 +105,10 @@ mod tests {
     #[test]
     fn presets_are_valid_and_default_is_the_3dmatch_fusion() {
         let d = TsdfConfig::default();
-        assert_eq!((d.voxel_size_m, d.truncation_m, d.min_depth_m, d.max_depth_m, d.block_side), (0.006, 0.03, 0.0, 6.0, 8));
+        assert_eq!(
+            (d.voxel_size_m, d.truncation_m, d.min_depth_m, d.max_depth_m, d.block_side),
+            (0.006, 0.03, 0.0, 6.0, 8)
+        );
         assert!((d.truncation_m / d.voxel_size_m - 5.0).abs() < 1e-5);
         assert!((d.block_size_m() - 0.048).abs() < 1e-7);
         for c in [TsdfConfig::threedmatch(), TsdfConfig::coarse(), TsdfConfig::open3d_fragments()] {

@@ -40,7 +40,9 @@ impl TsdfVolume {
                                 continue;
                             }
                             let g = [0, 1, 2].map(|a| (b[a] * side as i32) as f32 + [x, y, z][a] as f32 + 0.5);
-                            for (axis, n) in [nb.get(x + 1, y, z), nb.get(x, y + 1, z), nb.get(x, y, z + 1)].into_iter().enumerate() {
+                            for (axis, n) in
+                                [nb.get(x + 1, y, z), nb.get(x, y + 1, z), nb.get(x, y, z + 1)].into_iter().enumerate()
+                            {
                                 let Some(n) = n.filter(|n| usable(n)) else { continue };
                                 if (v.tsdf < 0.0) != (n.tsdf < 0.0) {
                                     let mut p = g;
@@ -83,7 +85,13 @@ mod tests {
     fn jumps_from_free_space_are_not_surface() {
         let mut v = TsdfVolume::new(TsdfConfig::coarse()).unwrap();
         // +1 (free space) directly against −0.5: a silhouette artefact, not a surface.
-        v.set_from_sdf(&Point::new(0.0, 0.0, 0.0), &Point::new(0.079, 0.079, 0.079), 3.0, |p| if p.x < 0.04 { 1.0 } else { -0.02 });
+        v.set_from_sdf(&Point::new(0.0, 0.0, 0.0), &Point::new(0.079, 0.079, 0.079), 3.0, |p| {
+            if p.x < 0.04 {
+                1.0
+            } else {
+                -0.02
+            }
+        });
         assert!(v.extract_points(0.0).is_empty());
     }
 }

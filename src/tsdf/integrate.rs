@@ -5,7 +5,8 @@
 //! order, and a voxel's update depends only on its old value and the frame, so the volume is the
 //! same bit for bit whatever the thread count.
 
-use super::volume::{floor_i32, pack, unpack, TsdfVolume, Voxel, KEY_BIAS};
+use super::update::{update_block, UpdateParams};
+use super::volume::{floor_i32, pack, unpack, TsdfVolume, KEY_BIAS};
 use crate::error::{Error, Result};
 use crate::geometry::{DepthMap, Intrinsics};
 use nalgebra::{Isometry3, Matrix3, Vector3};
@@ -50,7 +51,7 @@ impl Camera {
 
     /// `R·p + t`: a world point in camera coordinates.
     #[inline]
-    pub(crate) fn to_camera(&self, p: [f32; 3]) -> [f32; 3] {
+    pub(crate) fn camera_point(&self, p: [f32; 3]) -> [f32; 3] {
         let r = &self.r;
         [0, 1, 2].map(|i| r[i][0] * p[0] + r[i][1] * p[1] + r[i][2] * p[2] + self.t[i])
     }
@@ -76,48 +77,16 @@ pub(crate) fn check_inputs(depth: Option<&DepthMap>, k: &Intrinsics, pose: &Isom
     Ok(())
 }
 
-/// Calls `visit` for every cell of the unit grid that the segment `a → b` crosses, in order
-/// (Amanatides–Woo), ending exactly at `b`'s cell.
-#[inline]
-fn traverse(a: [f32; 3], b: [f32; 3], mut visit: impl FnMut([i32; 3])) {
-    let mut cell = a.map(floor_i32);
-    let end = b.map(floor_i32);
-    let mut step = [0i32; 3];
-    let mut t_max = [f32::INFINITY; 3];
-    let mut t_delta = [f32::INFINITY; 3];
-    for i in 0..3 {
-        let d = b[i] - a[i];
-        step[i] = (end[i] - cell[i]).signum();
-        if step[i] != 0 {
-            let boundary = if step[i] > 0 { (cell[i] + 1) as f32 } else { cell[i] as f32 };
-            t_max[i] = (boundary - a[i]) / d;
-            t_delta[i] = 1.0 / d.abs();
-        }
-    }
-    visit(cell);
-    let steps = (0..3).map(|i| (end[i] - cell[i]).abs()).sum::<i32>();
-    for _ in 0..steps {
-        // The axis whose boundary comes first, among those not yet at the end cell.
-        let mut axis = 3;
-        for i in 0..3 {
-            if cell[i] != end[i] && (axis == 3 || t_max[i] < t_max[axis]) {
-                axis = i;
-            }
-        }
-        cell[axis] += step[axis];
-        t_max[axis] += t_delta[axis];
-        visit(cell);
-    }
-}
-
 impl TsdfVolume {
     /// Integrates one depth map (metres, 0 = invalid) seen by a camera with intrinsics `k` (pixels)
-    /// at `t_world_from_camera`: each voxel of the blocks crossed by a pixel's band
-    /// `[d − truncation, d + truncation]` projects its centre to the nearest pixel; with that
-    /// pixel's depth `d` inside `(min_depth_m, max_depth_m]` and `sdf = d − z ≥ −truncation`, it
-    /// averages in `min(1, sdf/truncation)` with weight 1 (total capped at `max_weight`).
-    /// Fails when the depth map and the intrinsics disagree, or the pose is not finite or so far
-    /// from the origin that block coordinates would overflow (±2²⁰ blocks).
+    /// at `t_world_from_camera`. Pixels whose depth `d` lies outside `(min_depth_m, max_depth_m]`
+    /// are ignored. Allocation: every block in the box between the blocks of the two ends of a
+    /// pixel's band `[d − truncation, d + truncation]` along its ray (a superset of the blocks the
+    /// band crosses). Update: every voxel of every block so touched projects its centre to the
+    /// nearest pixel; when that pixel has depth `d` and `sdf = d − z ≥ −truncation` (`z` the
+    /// voxel's camera depth), the voxel averages in `min(1, sdf/truncation)` with weight 1 (total
+    /// capped at `max_weight`). Fails when the depth map and the intrinsics disagree, or the pose is
+    /// not finite or so far from the origin that block coordinates would overflow (±2²⁰ blocks).
     pub fn integrate(&mut self, depth: &DepthMap, k: &Intrinsics, t_world_from_camera: &Isometry3<f64>) -> Result<()> {
         check_inputs(Some(depth), k, t_world_from_camera)?;
         let c = &self.config;
@@ -133,9 +102,7 @@ impl TsdfVolume {
         }
         let depth: Vec<f32> = depth.data().iter().map(|&d| if d > near && d <= far { d } else { 0.0 }).collect();
 
-        let t0 = std::time::Instant::now();
         let keys = self.touched_keys(&depth, k, t_world_from_camera);
-        let t1 = t0.elapsed();
         self.updates += 1;
         self.frames += 1;
         let stamp = self.updates;
@@ -144,22 +111,17 @@ impl TsdfVolume {
             self.stamps[slot] = stamp;
         }
 
-        let t2 = t0.elapsed();
         let cam = Camera::new(k, t_world_from_camera);
-        let (side, cfg) = (self.side, self.config.clone());
-        let blocks = self.voxels.par_chunks_mut(side * side * side).zip(self.coords.par_iter()).zip(self.stamps.par_iter());
-        blocks.filter(|(_, st)| **st == stamp).for_each(|((vox, b), _)| {
-            update_block(vox, *b, side, &cam, &depth, cfg.voxel_size_m, trunc, cfg.max_weight);
-        });
-        if std::env::var_os("TSDF_DEBUG").is_some() {
-            let touched = self.stamps.iter().filter(|s| **s == stamp).count();
-            eprintln!("keys {} touched {} of {} | alloc {:?} merge {:?} update {:?}", keys.iter().map(|k| k.len()).sum::<usize>(), touched, self.coords.len(), t1, t2 - t1, t0.elapsed() - t2);
-        }
+        let c = &self.config;
+        let params = UpdateParams::new(self.side, c.voxel_size_m, c.truncation_m, c.max_weight);
+        let blocks =
+            self.voxels.par_chunks_mut(params.side.pow(3)).zip(self.coords.par_iter()).zip(self.stamps.par_iter());
+        blocks.filter(|(_, st)| **st == stamp).for_each(|((vox, b), _)| update_block(vox, *b, &cam, &depth, &params));
         Ok(())
     }
 
-    /// Keys of the blocks crossed by each valid pixel's truncation band, per task of
-    /// [`ROWS_PER_TASK`] rows, in row order (repeats within a task mostly removed).
+    /// Keys of the blocks to update (see [`TsdfVolume::integrate`]), per task of [`ROWS_PER_TASK`]
+    /// rows, in row order; repeats within a task mostly removed.
     fn touched_keys(&self, depth: &[f32], k: &Intrinsics, t_world_from_camera: &Isometry3<f64>) -> Vec<Vec<u64>> {
         let inv_block = 1.0 / self.config.block_size_m() as f64;
         let trunc = self.config.truncation_m;
@@ -185,31 +147,25 @@ impl TsdfVolume {
                         out.push(key);
                     }
                 };
-                let mut last = [[i32::MIN; 3]; 2];
+                let (mut ends, mut above) = (vec![0i32; 6 * w], vec![0i32; 6 * w]);
+                let mut changed = vec![0u8; w];
                 for (i, row) in rows.chunks(w).enumerate() {
                     let yn = (((task * ROWS_PER_TASK + i) as f64 - k.cy) / k.fy) as f32;
                     let base = [0, 1, 2].map(|a| ry[a] * yn + rz[a]);
-                    for (&d, &x) in row.iter().zip(&xn) {
-                        if d <= 0.0 {
-                            continue;
-                        }
-                        let ray = [0, 1, 2].map(|a| base[a] + rx[a] * x);
-                        let (z0, z1) = ((d - trunc).max(0.0), d + trunc);
-                        let a = [0, 1, 2].map(|i| floor_i32(o[i] + z0 * ray[i]));
-                        let b = [0, 1, 2].map(|i| floor_i32(o[i] + z1 * ray[i]));
-                        if [a, b] == last {
-                            continue;
-                        }
-                        last = [a, b];
-                        let (lo, hi) = (std::array::from_fn::<i32, 3, _>(|i| a[i].min(b[i])), std::array::from_fn::<i32, 3, _>(|i| a[i].max(b[i])));
-                        for z in lo[2]..=hi[2] {
-                            for y in lo[1]..=hi[1] {
-                                for x in lo[0]..=hi[0] {
+                    band_cells(row, &xn, base, rx, o, trunc, &mut ends);
+                    let up = (i > 0).then(|| (&rows[(i - 1) * w..i * w], &above[..]));
+                    new_cells(row, &ends, up, &mut changed);
+                    for c in (0..w).filter(|&c| changed[c] != 0) {
+                        let e: [i32; 6] = std::array::from_fn(|j| ends[j * w + c]);
+                        for z in e[2].min(e[5])..=e[2].max(e[5]) {
+                            for y in e[1].min(e[4])..=e[1].max(e[4]) {
+                                for x in e[0].min(e[3])..=e[0].max(e[3]) {
                                     push([x, y, z]);
                                 }
                             }
                         }
                     }
+                    std::mem::swap(&mut ends, &mut above);
                 }
                 out
             })
@@ -217,45 +173,49 @@ impl TsdfVolume {
     }
 }
 
-/// The projective update of one block at block coordinate `b` (see [`TsdfVolume::integrate`]);
-/// `depth` is row-major metres with out-of-range values already 0.
+/// For each pixel `c` of an image row (depth `row[c]`, metres), the block cells of the near and far
+/// ends of its truncation band `[max(d − trunc, 0), d + trunc]` along the ray `base + rx·xn[c]`
+/// (`o`, `base` and `rx` in block units, so a cell is a floor): `ends[a·w + c]` for the near end
+/// along axis `a`, `ends[(a + 3)·w + c]` for the far end. Branch-free, so it vectorises.
 #[allow(clippy::too_many_arguments)]
-#[inline]
-fn update_block(vox: &mut [Voxel], b: [i32; 3], side: usize, cam: &Camera, depth: &[f32], voxel: f32, trunc: f32, max_w: f32) {
-    let n = side as i32;
-    let origin = [0, 1, 2].map(|a| ((b[a] * n) as f32 + 0.5) * voxel);
-    let base = cam.to_camera(origin);
-    // Camera-frame steps of one voxel along world x, y, z: columns of R scaled.
-    let step = |j: usize| [cam.r[0][j] * voxel, cam.r[1][j] * voxel, cam.r[2][j] * voxel];
-    let (dx, dy, dz) = (step(0), step(1), step(2));
-    let (w, h) = (cam.width as f32, cam.height as f32);
-    let inv_trunc = 1.0 / trunc;
-    for (zi, plane) in vox.chunks_exact_mut(side * side).enumerate() {
-        for (yi, row) in plane.chunks_exact_mut(side).enumerate() {
-            let (fz, fy) = (zi as f32, yi as f32);
-            let mut p = [0, 1, 2].map(|a| base[a] + dz[a] * fz + dy[a] * fy);
-            for v in row.iter_mut() {
-                let z = p[2];
-                if z > 0.0 {
-                    let inv_z = 1.0 / z;
-                    let u = cam.fx * p[0] * inv_z + cam.cx + 0.5;
-                    let r = cam.fy * p[1] * inv_z + cam.cy + 0.5;
-                    if u >= 0.0 && u < w && r >= 0.0 && r < h {
-                        let d = depth[r as usize * cam.width + u as usize];
-                        let sdf = d - z;
-                        if d > 0.0 && sdf >= -trunc {
-                            let t = (sdf * inv_trunc).min(1.0);
-                            let w0 = v.weight;
-                            let w1 = w0 + 1.0;
-                            v.tsdf = (v.tsdf * w0 + t) / w1;
-                            v.weight = w1.min(max_w);
-                        }
-                    }
-                }
-                for a in 0..3 {
-                    p[a] += dx[a];
-                }
+#[inline(never)]
+fn band_cells(row: &[f32], xn: &[f32], base: [f32; 3], rx: [f32; 3], o: [f32; 3], trunc: f32, ends: &mut [i32]) {
+    let w = row.len();
+    let (xn, ends) = (&xn[..w], &mut ends[..6 * w]);
+    for c in 0..w {
+        let (d, x) = (row[c], xn[c]);
+        let ray = [0, 1, 2].map(|a| base[a] + rx[a] * x);
+        let (z0, z1) = ((d - trunc).max(0.0), d + trunc);
+        for a in 0..3 {
+            ends[a * w + c] = floor_i32(o[a] + z0 * ray[a]);
+            ends[(a + 3) * w + c] = floor_i32(o[a] + z1 * ray[a]);
+        }
+    }
+}
+
+/// `changed[c] = 1` when pixel `c` has depth and neither its left neighbour nor (given `up`: the
+/// row above's depths and [`band_cells`]) the pixel above has depth and the same six cells: the
+/// pixels whose band boxes are not already listed. Branch-free, so it vectorises.
+#[inline(never)]
+fn new_cells(row: &[f32], ends: &[i32], up: Option<(&[f32], &[i32])>, changed: &mut [u8]) {
+    let w = row.len();
+    changed[0] = (row[0] > 0.0) as u8;
+    let lanes: [&[i32]; 6] = std::array::from_fn(|j| &ends[j * w..(j + 1) * w]);
+    for c in 1..w {
+        let mut diff = false;
+        for lane in &lanes {
+            diff |= lane[c] != lane[c - 1];
+        }
+        changed[c] = ((row[c] > 0.0) & (diff | (row[c - 1] <= 0.0))) as u8;
+    }
+    if let Some((up_row, up_ends)) = up {
+        let up_lanes: [&[i32]; 6] = std::array::from_fn(|j| &up_ends[j * w..(j + 1) * w]);
+        for c in 0..w {
+            let mut diff = false;
+            for j in 0..6 {
+                diff |= lanes[j][c] != up_lanes[j][c];
             }
+            changed[c] &= (diff | (up_row[c] <= 0.0)) as u8;
         }
     }
 }

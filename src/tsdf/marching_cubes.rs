@@ -145,7 +145,12 @@ mod tests {
         assert!(mesh.triangles.len() > 2000, "{}", mesh.triangles.len());
         assert!(mesh.is_closed(), "sphere mesh has boundary or non-manifold edges");
         let worst = mesh.vertices.iter().map(|p| ((p - c).norm() - r).abs()).fold(0.0f32, f32::max);
-        println!("sphere: {} vertices, {} triangles, worst |d| {:.2} mm", mesh.vertices.len(), mesh.triangles.len(), worst * 1e3);
+        println!(
+            "sphere: {} vertices, {} triangles, worst |d| {:.2} mm",
+            mesh.vertices.len(),
+            mesh.triangles.len(),
+            worst * 1e3
+        );
         assert!(worst < 0.5 * 0.01, "worst vertex {worst} m from the sphere");
         // Outward normals: area-weighted normal · (centroid − centre) > 0 for (nearly) all.
         let outward = mesh.triangles.iter().filter(|t| {
@@ -154,10 +159,14 @@ mod tests {
         });
         assert!(outward.count() as f64 > 0.99 * mesh.triangles.len() as f64);
         // Enclosed volume (divergence theorem) matches the ball's.
-        let vol: f32 = mesh.triangles.iter().map(|t| {
-            let [a, b, d] = t.map(|i| mesh.vertices[i as usize] - c);
-            a.dot(&b.cross(&d)) / 6.0
-        }).sum();
+        let vol: f32 = mesh
+            .triangles
+            .iter()
+            .map(|t| {
+                let [a, b, d] = t.map(|i| mesh.vertices[i as usize] - c);
+                a.dot(&b.cross(&d)) / 6.0
+            })
+            .sum();
         let ball = 4.0 / 3.0 * std::f32::consts::PI * r.powi(3);
         assert!((vol / ball - 1.0).abs() < 0.01, "volume {vol} vs {ball}");
     }

@@ -8,19 +8,20 @@
 //! space), negative behind it. Voxel `i` spans `[i·s, (i+1)·s)` (origin at 0) with its centre at
 //! `(i + ½)·s`. Every result is the same bit for bit whatever the rayon thread count.
 //!
-//! Files: [`config`] (parameters), [`volume`] (hashed blocks), `integrate` (projective update),
+//! Files: [`config`] (parameters), [`volume`] (hashed blocks), `integrate` (block allocation and
+//! the parallel update) with its per-block kernel in `update` (scalar and AVX2, bit-identical),
 //! `extract` (points), `marching_cubes` with its lookup tables in [`tables`], `raycast` with its
-//! lookups in `sample`, [`mesh`]
-//! (mesh type and PLY writer), and the fusion helpers below.
+//! lookups in `sample`, [`mesh`] (mesh type and PLY writer), and the fusion helpers below.
 
 pub mod config;
 mod extract;
 mod integrate;
 mod marching_cubes;
 pub mod mesh;
-pub mod raycast;
+mod raycast;
 mod sample;
 pub mod tables;
+mod update;
 pub mod volume;
 
 pub use config::TsdfConfig;
@@ -45,7 +46,11 @@ pub fn fuse_frames(frames: &[(DepthMap, Intrinsics, Isometry3<f64>)], config: &T
 /// Fuses `frames` as a 3DMatch fragment: in the camera frame of `frames[base]`, each frame entering
 /// with `t_base_from_camera = inv(t_world_from_base) · t_world_from_camera`. The volume's
 /// coordinates are metres in the base camera (x right, y down, z forward).
-pub fn fuse_fragment(frames: &[(DepthMap, Intrinsics, Isometry3<f64>)], base: usize, config: &TsdfConfig) -> Result<TsdfVolume> {
+pub fn fuse_fragment(
+    frames: &[(DepthMap, Intrinsics, Isometry3<f64>)],
+    base: usize,
+    config: &TsdfConfig,
+) -> Result<TsdfVolume> {
     let t_base_from_world = frames
         .get(base)
         .ok_or_else(|| Error::InvalidArgument(format!("base frame {base} of a {}-frame fragment", frames.len())))?

@@ -6,18 +6,17 @@
 
 use super::extract::MAX_CROSSING_TSDF;
 use super::integrate::check_inputs;
-use super::sample::{Occupancy, Sampler};
+use super::sample::{BlockDistance, Sampler};
 use super::volume::{floor_i32, TsdfVolume};
 use crate::error::Result;
 use crate::geometry::{DepthMap, Intrinsics};
 use nalgebra::{Isometry3, Vector3};
 use rayon::prelude::*;
-pub static CNT: [std::sync::atomic::AtomicU64; 4] = [const { std::sync::atomic::AtomicU64::new(0) }; 4];
-fn bump(i: usize) { CNT[i].fetch_add(1, std::sync::atomic::Ordering::Relaxed); }
-pub fn raycast_counts() -> [u64; 4] { [0,1,2,3].map(|i| CNT[i].swap(0, std::sync::atomic::Ordering::Relaxed)) }
 
 /// In observed space a ray advances by this fraction of `tsdf · truncation` (at least one voxel).
 const STEP_FRACTION: f32 = 0.8;
+/// Rays are cast in square tiles of this many pixels a side.
+const TILE: usize = 8;
 
 /// The state of a DDA walk over the block grid along `o + z·d` (z is the ray parameter).
 struct BlockWalk {
@@ -74,49 +73,69 @@ impl TsdfVolume {
     pub fn raycast(&self, k: &Intrinsics, t_world_from_camera: &Isometry3<f64>) -> Result<DepthMap> {
         check_inputs(None, k, t_world_from_camera)?;
         let mut out = DepthMap::zeros(k.width, k.height);
-        let Some(occupancy) = Occupancy::new(self) else { return Ok(out) };
+        if self.coords.is_empty() {
+            return Ok(out);
+        }
+        let distance = BlockDistance::new(self);
         let o = t_world_from_camera.translation.vector.map(|v| v as f32);
         let r = t_world_from_camera.rotation.to_rotation_matrix().into_inner();
-        out.data_mut().par_chunks_mut(k.width as usize).enumerate().for_each(|(row, line)| {
+        // Tiles of TILE×TILE pixels: neighbouring rays read the same voxels, so they stay in cache.
+        let w = k.width as usize;
+        out.data_mut().par_chunks_mut(w * TILE).enumerate().for_each(|(band, lines)| {
             let mut sampler = Sampler::new(self);
-            let yn = (row as f64 - k.cy) / k.fy;
-            for (c, z_out) in line.iter_mut().enumerate() {
-                let d = r * Vector3::new((c as f64 - k.cx) / k.fx, yn, 1.0);
-                let d = [d.x as f32, d.y as f32, d.z as f32];
-                *z_out = self.march(&mut sampler, &occupancy, [o.x, o.y, o.z], d).unwrap_or(0.0);
+            let rows = lines.len() / w;
+            for c0 in (0..w).step_by(TILE) {
+                for i in 0..rows {
+                    let yn = ((band * TILE + i) as f64 - k.cy) / k.fy;
+                    for c in c0..(c0 + TILE).min(w) {
+                        let d = r * Vector3::new((c as f64 - k.cx) / k.fx, yn, 1.0);
+                        let d = [d.x as f32, d.y as f32, d.z as f32];
+                        lines[i * w + c] = self.march(&mut sampler, &distance, [o.x, o.y, o.z], d).unwrap_or(0.0);
+                    }
+                }
             }
         });
         Ok(out)
     }
 
     /// The first + → − crossing along `o + z·d` (world metres; `d` has camera z component 1).
-    fn march(&self, s: &mut Sampler, occ: &Occupancy, o: [f32; 3], d: [f32; 3]) -> Option<f32> {
+    fn march(&self, s: &mut Sampler, dist: &BlockDistance, o: [f32; 3], d: [f32; 3]) -> Option<f32> {
         let c = &self.config;
         let (trunc, bm) = (c.truncation_m, c.block_size_m());
         let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
         let fine = c.voxel_size_m / len;
+        // z advance that moves at most one block along every axis.
+        let block_z = bm / d[0].abs().max(d[1].abs()).max(d[2].abs());
         let at = |z: f32| [0, 1, 2].map(|a| o[a] + z * d[a]);
-        // Clip the ray to the occupancy grid's box.
         let (mut z, mut z_end) = (c.min_depth_m.max(fine), c.max_depth_m);
-        for a in 0..3 {
-            let lo = occ.min[a] as f32 * bm;
-            let hi = (occ.min[a] + occ.dims[a] as i32) as f32 * bm;
-            if d[a] == 0.0 {
-                if !(lo..=hi).contains(&o[a]) {
-                    return None;
+        if let Some((lo, hi)) = dist.bounds() {
+            // Clip the ray to the box of allocated blocks.
+            for a in 0..3 {
+                let (lo, hi) = (lo[a] as f32 * bm, hi[a] as f32 * bm);
+                if d[a] == 0.0 {
+                    if !(lo..=hi).contains(&o[a]) {
+                        return None;
+                    }
+                } else {
+                    let (t0, t1) = ((lo - o[a]) / d[a], (hi - o[a]) / d[a]);
+                    z = z.max(t0.min(t1));
+                    z_end = z_end.min(t0.max(t1));
                 }
-            } else {
-                let (t0, t1) = ((lo - o[a]) / d[a], (hi - o[a]) / d[a]);
-                z = z.max(t0.min(t1));
-                z_end = z_end.min(t0.max(t1));
             }
         }
         let mut walk = BlockWalk::new(o, d, z, bm);
         let mut prev: Option<(f32, f32)> = None;
         let mut last_step = 0.0f32;
         while z <= z_end {
-            if !occ.get(walk.cell) {
-                bump(0);
+            let k = dist.get(walk.cell);
+            if k > 1 {
+                // Every block within k − 1 of this one is empty: jump.
+                z += (k - 1) as f32 * block_z * 0.999;
+                walk = BlockWalk::new(o, d, z, bm);
+                prev = None;
+                continue;
+            }
+            if k == 1 {
                 z = z.max(walk.exit());
                 walk.advance();
                 prev = None;
@@ -124,12 +143,10 @@ impl TsdfVolume {
             }
             match s.trilinear(at(z)) {
                 None => {
-                    bump(1);
                     prev = None;
                     last_step = fine;
                 }
                 Some(f) => {
-                    bump(2);
                     if let Some((zp, fp)) = prev.filter(|(_, fp)| *fp > 0.0 && f <= 0.0) {
                         if last_step > 1.01 * fine {
                             // Overshot with a long step: walk the last interval again voxel by voxel.
@@ -148,9 +165,8 @@ impl TsdfVolume {
             z += last_step;
             // Follow the walk to the cell holding z; a skipped empty cell breaks the bracket.
             while walk.exit() <= z {
-                bump(3);
                 walk.advance();
-                if walk.exit() <= z && !occ.get(walk.cell) {
+                if walk.exit() <= z && dist.get(walk.cell) > 0 {
                     prev = None;
                 }
             }

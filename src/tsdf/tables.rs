@@ -93,7 +93,8 @@ fn face_segments(case: usize) -> Vec<(usize, usize)> {
         let (u, v) = [(1, 2), (0, 2), (0, 1)][axis];
         for side in 0..2 {
             // The face's corners in cyclic order.
-            let ring: Vec<usize> = [(0, 0), (1, 0), (1, 1), (0, 1)].iter().map(|&(a, b)| side << axis | a << u | b << v).collect();
+            let ring: Vec<usize> =
+                [(0, 0), (1, 0), (1, 1), (0, 1)].iter().map(|&(a, b)| side << axis | a << u | b << v).collect();
             let edge = |i: usize| edge_between(ring[i % 4], ring[(i + 1) % 4]);
             let ins: Vec<usize> = (0..4).filter(|&i| inside(ring[i])).collect();
             // (entry edge, exit edge, a reference corner strictly on one side of the segment).
@@ -187,7 +188,8 @@ fn case_triangles(case: usize) -> Vec<[u8; 3]> {
             ring.push(e);
             e = next[e];
         }
-        let tris = triangulate(&ring, &|a, b| !share_face(a, b)).unwrap_or_else(|| panic!("case {case}: loop {ring:?}"));
+        let tris =
+            triangulate(&ring, &|a, b| !share_face(a, b)).unwrap_or_else(|| panic!("case {case}: loop {ring:?}"));
         triangles.extend(tris.iter().map(|t| t.map(|e| e as u8)));
     }
     triangles
@@ -226,9 +228,11 @@ mod tests {
             assert_eq!(used, expect, "case {case}");
             // Directed edges of the triangles that are not cancelled by their reverse are the face
             // segments, each once: the patch's boundary lies on the cube's faces.
-            let mut directed: Vec<(u8, u8)> = tris.iter().flat_map(|t| [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])]).collect();
+            let mut directed: Vec<(u8, u8)> =
+                tris.iter().flat_map(|t| [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])]).collect();
             directed.sort();
-            let boundary: Vec<(u8, u8)> = directed.iter().copied().filter(|(a, b)| !directed.contains(&(*b, *a))).collect();
+            let boundary: Vec<(u8, u8)> =
+                directed.iter().copied().filter(|(a, b)| !directed.contains(&(*b, *a))).collect();
             let mut segs: Vec<(u8, u8)> = face_segments(case).iter().map(|&(a, b)| (a as u8, b as u8)).collect();
             segs.sort();
             assert_eq!(boundary, segs, "case {case}");

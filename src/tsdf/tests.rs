@@ -28,7 +28,11 @@ fn fronto_parallel_plane_matches_the_analytic_tsdf() {
     let (mut observed, mut checked_band) = (0, 0);
     for (b, blk) in v.coords.iter().zip(v.voxels.chunks(v.side.pow(3))) {
         for (i, vox) in blk.iter().enumerate() {
-            let g = [b[0] * side + i as i32 % side, b[1] * side + i as i32 / side % side, b[2] * side + i as i32 / side / side];
+            let g = [
+                b[0] * side + i as i32 % side,
+                b[1] * side + i as i32 / side % side,
+                b[2] * side + i as i32 / side / side,
+            ];
             let c = v.voxel_center(g);
             let (u, r) = (150.0 * c.x / c.z + 80.0, 150.0 * c.y / c.z + 60.0);
             let inside = c.z > 0.0 && (-0.5..159.5).contains(&u) && (-0.5..119.5).contains(&r);
@@ -114,7 +118,8 @@ fn bad_inputs_are_errors() {
 #[test]
 fn fragments_live_in_the_base_camera_frame() {
     // A camera 2 m up and turned: in its own frame the plane is at z = 1.2 m whatever the world pose.
-    let base = Isometry3::from_parts(Translation3::new(0.3, -1.0, 2.0), UnitQuaternion::from_euler_angles(0.3, -0.2, 1.0));
+    let base =
+        Isometry3::from_parts(Translation3::new(0.3, -1.0, 2.0), UnitQuaternion::from_euler_angles(0.3, -0.2, 1.0));
     let moved = base * Isometry3::translation(0.0, 0.0, 0.05);
     let frames = vec![(plane(1.2), small_k(), base), (plane(1.15), small_k(), moved)];
     let frag = fuse_fragment(&frames, 0, &TsdfConfig::coarse()).unwrap();
@@ -124,15 +129,25 @@ fn fragments_live_in_the_base_camera_frame() {
     let world = fuse_frames(&frames, &TsdfConfig::coarse()).unwrap();
     let d_frag = frag.raycast(&small_k(), &Isometry3::identity()).unwrap();
     let d_world = world.raycast(&small_k(), &base).unwrap();
-    let dz: Vec<f32> =
-        d_frag.data().iter().zip(d_world.data()).filter(|(a, b)| **a > 0.0 && **b > 0.0).map(|(a, b)| (a - b).abs()).collect();
+    let dz: Vec<f32> = d_frag
+        .data()
+        .iter()
+        .zip(d_world.data())
+        .filter(|(a, b)| **a > 0.0 && **b > 0.0)
+        .map(|(a, b)| (a - b).abs())
+        .collect();
     assert!(dz.len() > 10_000 && median(dz) < 5e-4);
     assert!(fuse_fragment(&frames, 2, &TsdfConfig::coarse()).is_err());
 }
 
 #[test]
 fn results_are_bit_identical_for_one_and_two_threads() {
-    let cfg = SyntheticConfig { frames: 6, intrinsics: small_k(), sensor: SensorConfig::default(), ..SyntheticConfig::default() };
+    let cfg = SyntheticConfig {
+        frames: 6,
+        intrinsics: small_k(),
+        sensor: SensorConfig::default(),
+        ..SyntheticConfig::default()
+    };
     let seq = SyntheticSequence::generate(&cfg, 3).unwrap();
     let frames: Vec<(DepthMap, Intrinsics, Isometry3<f64>)> =
         (0..seq.len()).map(|i| (seq.noisy_depth(i), seq.intrinsics, seq.poses[i])).collect();
