@@ -44,6 +44,13 @@ pub enum Command {
     Preview(commands::preview::PreviewArgs),
     /// Rows by status (reject reasons) and overlap histograms, as stats.txt and a stats.png bar plot.
     Stats(commands::stats::StatsArgs),
+    /// Train a network: `train correction` fits the depth-correction U-Net to label shards,
+    /// `train diffusion` the diffusion denoiser to depth frames (checkpoints, resumable).
+    Train(commands::train::TrainArgs),
+    /// Evaluate: `eval correction` compares the handcrafted filters and U-Net checkpoints on held-out
+    /// label shards; `eval inpaint` compares correction and fill methods with the depth captured on real
+    /// sequences. Tables and CSV.
+    Eval(commands::eval::EvalArgs),
 }
 
 impl Cli {
@@ -68,6 +75,8 @@ impl Cli {
             Command::Export(a) => commands::export::run(a, out),
             Command::Preview(a) => commands::preview::run(a, out),
             Command::Stats(a) => commands::stats::run(a, out),
+            Command::Train(a) => commands::train::run(a, out),
+            Command::Eval(a) => commands::eval::run(a, out),
         }
     }
 }

@@ -4,11 +4,13 @@
 pub mod cli;
 pub mod commands;
 pub mod correction;
+pub mod diffusion;
 pub mod error;
 pub mod export;
 pub mod geometry;
 pub mod inpainting;
 pub mod labels;
+pub mod nn;
 pub mod pipeline;
 pub mod query;
 pub mod preview;

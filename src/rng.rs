@@ -75,6 +75,20 @@ impl Rng {
         (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
     }
 
+    /// Fills `out` with standard normals, two per Box–Muller draw (the sampler's noise images).
+    pub fn fill_normal_f32(&mut self, out: &mut [f32]) {
+        for pair in out.chunks_mut(2) {
+            let u1 = 1.0 - self.uniform();
+            let u2 = self.uniform();
+            let r = (-2.0 * u1.ln()).sqrt();
+            let (s, c) = (std::f64::consts::TAU * u2).sin_cos();
+            pair[0] = (r * c) as f32;
+            if let Some(v) = pair.get_mut(1) {
+                *v = (r * s) as f32;
+            }
+        }
+    }
+
     /// A generator for a sub-stream (for example one per pixel row), independent of this one's position.
     pub fn fork(&self, stream: u64) -> Rng {
         Rng::new(self.s[0] ^ stream.wrapping_mul(0xD6E8_FEB8_6659_FD93) ^ self.s[2].rotate_left(17))

@@ -6,7 +6,7 @@ use crate::error::{Error, Result};
 use crate::geometry::{
     backproject, overlap, project_zbuffer, voxel_downsample, AxisBox, DepthMap, DepthRange, PivotPoseSampler, ResizeCrop,
 };
-use crate::inpainting::InpaintConfig;
+use crate::inpainting::{InpaintConfig, InpaintContext};
 use crate::rng::{unit_seed, Rng};
 use crate::sources::synthetic::{SyntheticConfig, SyntheticSequence};
 use crate::sources::{depth_png, ply, text};
@@ -46,7 +46,7 @@ pub fn run(args: &DemoArgs, out: &mut dyn Write) -> Result<()> {
     let corrector = CorrectionConfig::MinPool { threshold: 0.0375 }.build();
     let keep = corrector.keep_mask(&condition);
     let dropped_condition = apply_keep_mask(&mut condition, &mut known, &keep);
-    let mut target_depth = InpaintConfig::PushPull.build().inpaint(&condition, &known);
+    let mut target_depth = InpaintConfig::PushPull.build()?.inpaint(&condition, &known, &InpaintContext { intrinsics: k, seed: 0 });
     let mut all_known = vec![true; known.len()];
     let keep = corrector.keep_mask(&target_depth);
     let dropped_output = apply_keep_mask(&mut target_depth, &mut all_known, &keep);

@@ -11,3 +11,5 @@ pub mod stats;
 pub mod query;
 pub mod synth;
 pub mod verify;
+pub mod train;
+pub mod eval;

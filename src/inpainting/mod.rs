@@ -1,11 +1,22 @@
 //! Inpainting: fill the pixels the re-projection left unknown, keeping known pixels bit-exact.
 
+pub mod diffusion;
 pub mod push_pull;
 
-use crate::geometry::DepthMap;
+use crate::geometry::{DepthMap, Intrinsics};
 use serde::{Deserialize, Serialize};
 
+pub use diffusion::{DiffusionInpainter, DiffusionInpaintConfig};
 pub use push_pull::PushPull;
+
+/// What an inpainter may know about a target view besides its pixels.
+#[derive(Clone, Copy, Debug)]
+pub struct InpaintContext {
+    /// The target camera's working-resolution intrinsics.
+    pub intrinsics: Intrinsics,
+    /// The work unit's seed: every random draw of a stochastic method comes from it.
+    pub seed: u64,
+}
 
 /// A depth inpainting method.
 pub trait Inpainter: Send + Sync {
@@ -13,7 +24,7 @@ pub trait Inpainter: Send + Sync {
     fn name(&self) -> &'static str;
     /// A full depth map whose known pixels equal `depth` bit for bit and whose unknown pixels are filled
     /// (or left 0 where the method cannot fill).
-    fn inpaint(&self, depth: &DepthMap, known: &[bool]) -> DepthMap;
+    fn inpaint(&self, depth: &DepthMap, known: &[bool], ctx: &InpaintContext) -> DepthMap;
 }
 
 /// Leaves unknown pixels empty.
@@ -24,7 +35,7 @@ impl Inpainter for NoInpainting {
     fn name(&self) -> &'static str {
         "none"
     }
-    fn inpaint(&self, depth: &DepthMap, known: &[bool]) -> DepthMap {
+    fn inpaint(&self, depth: &DepthMap, known: &[bool], _: &InpaintContext) -> DepthMap {
         let mut out = depth.clone();
         for (z, k) in out.data_mut().iter_mut().zip(known) {
             if !k {
@@ -43,14 +54,40 @@ pub enum InpaintConfig {
     None,
     /// Classical push–pull pyramid fill (smooth, fast).
     PushPull,
+    /// The diffusion model with the exact range–null-space step (paper §3.2, reference §5.4).
+    Diffusion(DiffusionInpaintConfig),
 }
 
 impl InpaintConfig {
-    /// The inpainter this config describes.
-    pub fn build(&self) -> Box<dyn Inpainter> {
+    /// Checks the settings (and that a diffusion checkpoint loads); `field` names the config in errors.
+    pub fn validate(&self, field: &str) -> crate::Result<()> {
         match self {
-            InpaintConfig::None => Box::new(NoInpainting),
-            InpaintConfig::PushPull => Box::new(PushPull),
+            InpaintConfig::Diffusion(c) => c.validate(field),
+            _ => Ok(()),
         }
     }
+
+    /// The model file this method reads, if any.
+    pub fn checkpoint(&self) -> Option<crate::nn::ModelPath> {
+        match self {
+            InpaintConfig::Diffusion(c) => Some(c.checkpoint),
+            _ => None,
+        }
+    }
+
+    /// The inpainter this config describes (call [`Self::validate`] first).
+    pub fn build(&self) -> crate::Result<Box<dyn Inpainter>> {
+        Ok(match self {
+            InpaintConfig::None => Box::new(NoInpainting),
+            InpaintConfig::PushPull => Box::new(PushPull),
+            InpaintConfig::Diffusion(c) => Box::new(DiffusionInpainter::load(c, tch::Device::Cpu)?),
+        })
+    }
+}
+
+/// A context for unit tests of inpainters: a pinhole camera centred on the map, seed 0.
+#[cfg(test)]
+pub(crate) fn test_context(d: &DepthMap) -> InpaintContext {
+    let (w, h) = (d.width(), d.height());
+    InpaintContext { intrinsics: Intrinsics::new(w as f64, w as f64, w as f64 / 2.0, h as f64 / 2.0, w, h).unwrap(), seed: 0 }
 }

@@ -1,7 +1,7 @@
 //! Push–pull depth fill: a weighted image pyramid averages known depths down, then fills unknown pixels
 //! from coarser levels on the way back up.
 
-use super::Inpainter;
+use super::{InpaintContext, Inpainter};
 use crate::geometry::DepthMap;
 
 /// The classical fill (Gortler et al.'s push–pull): every unknown pixel gets a smooth weighted average of
@@ -23,7 +23,7 @@ impl Inpainter for PushPull {
         "push_pull"
     }
 
-    fn inpaint(&self, depth: &DepthMap, known: &[bool]) -> DepthMap {
+    fn inpaint(&self, depth: &DepthMap, known: &[bool], _: &InpaintContext) -> DepthMap {
         let (w, h) = (depth.width() as usize, depth.height() as usize);
         let d = depth.data();
         let mut levels = vec![Level {
@@ -124,7 +124,7 @@ mod tests {
         let data: Vec<f32> = (0..w * h).map(|_| r.uniform_range(0.5, 5.0) as f32).collect();
         let known: Vec<bool> = (0..w * h).map(|_| r.uniform() < 0.3).collect();
         let d = DepthMap::new(w, h, data.clone()).unwrap();
-        let out = PushPull.inpaint(&d, &known);
+        let out = PushPull.inpaint(&d, &known, &super::super::test_context(&d));
         for i in 0..(w * h) as usize {
             if known[i] {
                 assert_eq!(out.data()[i].to_bits(), data[i].to_bits());
@@ -139,7 +139,7 @@ mod tests {
         let (w, h) = (32u32, 32u32);
         let data = vec![2.0f32; (w * h) as usize];
         let known: Vec<bool> = (0..w * h).map(|i| !((10..20).contains(&(i % w)) && (10..20).contains(&(i / w)))).collect();
-        let out = PushPull.inpaint(&DepthMap::new(w, h, data).unwrap(), &known);
+        let out = { let d = DepthMap::new(w, h, data).unwrap(); PushPull.inpaint(&d, &known, &super::super::test_context(&d)) };
         assert!(out.data().iter().all(|z| (*z - 2.0).abs() < 1e-6));
     }
 
@@ -149,7 +149,7 @@ mod tests {
         let (w, h) = (64u32, 32u32);
         let data: Vec<f32> = (0..w * h).map(|i| 1.0 + 0.01 * (i % w) as f32).collect();
         let known: Vec<bool> = (0..w * h).map(|i| !(20..40).contains(&(i % w))).collect();
-        let out = PushPull.inpaint(&DepthMap::new(w, h, data.clone()).unwrap(), &known);
+        let out = { let d = DepthMap::new(w, h, data.clone()).unwrap(); PushPull.inpaint(&d, &known, &super::super::test_context(&d)) };
         let worst = out.data().iter().zip(&data).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
         assert!(worst < 0.06, "largest deviation from the ramp {worst}");
         // Neighbouring filled pixels never jump by more than a few ramp steps.
@@ -164,7 +164,7 @@ mod tests {
     #[test]
     fn nothing_known_stays_empty() {
         let d = DepthMap::zeros(8, 8);
-        let out = PushPull.inpaint(&d, &[false; 64]);
+        let out = PushPull.inpaint(&d, &[false; 64], &super::super::test_context(&d));
         assert!(out.data().iter().all(|z| *z == 0.0));
     }
 }

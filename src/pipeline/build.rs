@@ -76,7 +76,7 @@ pub fn run_build(config: &BuildConfig, opts: &BuildOptions, cancel: &CancelToken
             PairUnit::new(u, fi, si, unit_seed(seed, &f.key, si as u64), f.scene.clone(), f.key.clone())
         })
     };
-    let stages = build_stages(config, catalog, opts.strict, rayon::current_num_threads());
+    let stages = build_stages(config, catalog, opts.strict, rayon::current_num_threads())?;
     let mut sink = ShardSink::new(&dataset, config.shard_size, total_units, todo);
     let summary = run_pipeline(units, stages, &mut sink, todo_units, opts.progress, cancel)?;
     Ok(BuildReport {
@@ -93,10 +93,11 @@ pub fn run_build(config: &BuildConfig, opts: &BuildOptions, cancel: &CancelToken
 /// The stages of the build pipeline, in order, each replicated over `threads` workers (a unit's work
 /// is a few milliseconds, so parallelism across units is what fills the cores; the sink restores unit
 /// order within each shard).
-fn build_stages(config: &BuildConfig, catalog: Arc<Catalog>, strict: bool, threads: usize) -> Vec<StageSpec<PairUnit>> {
+fn build_stages(config: &BuildConfig, catalog: Arc<Catalog>, strict: bool, threads: usize) -> Result<Vec<StageSpec<PairUnit>>> {
     let w = &config.working;
     let n = threads;
-    vec![
+    let mut inpainters = (0..n).map(|_| config.inpaint.build()).collect::<Result<Vec<_>>>()?.into_iter();
+    Ok(vec![
         StageSpec::replicated(n, || Ingest { catalog: catalog.clone(), working: w.clone(), strict }),
         StageSpec::replicated(n, || PoseSampling {
             sampler: config.pose.pivot_sampler(),
@@ -106,7 +107,7 @@ fn build_stages(config: &BuildConfig, catalog: Arc<Catalog>, strict: bool, threa
         }),
         StageSpec::replicated(n, || Reproject),
         StageSpec::replicated(n, || Correct { target: Target::Condition, corrector: config.correct.condition.build() }),
-        StageSpec::replicated(n, || Inpaint { inpainter: config.inpaint.build() }),
+        StageSpec::replicated(n, || Inpaint { inpainter: inpainters.next().expect("one inpainter per worker") }),
         StageSpec::replicated(n, || Correct { target: Target::Output, corrector: config.correct.output.build() }),
         StageSpec::replicated(n, || Voxelize { voxel: config.voxelize.voxel, min_points: config.voxelize.min_points, depth_range: w.depth_range(), crop_box: w.crop_box }),
         StageSpec::replicated(n, || ValidateOverlap { config: config.validate.clone() }),
@@ -117,7 +118,7 @@ fn build_stages(config: &BuildConfig, catalog: Arc<Catalog>, strict: bool, threa
             depth_maps: config.output.depth_maps,
             size: w.size,
         }),
-    ]
+    ])
 }
 
 /// The provenance record of the stages: names and parameters (and model hashes when models exist).
@@ -126,11 +127,16 @@ fn stages_json(config: &BuildConfig) -> String {
         {"stage": "ingest", "select": config.select, "working": config.working},
         {"stage": "pose", "sampler": "pivot", "params": config.pose},
         {"stage": "reproject", "zbuffer": "nearest", "rounding": "half_even"},
-        {"stage": "correct_condition", "params": config.correct.condition},
-        {"stage": "inpaint", "params": config.inpaint},
-        {"stage": "correct_output", "params": config.correct.output},
+        {"stage": "correct_condition", "params": config.correct.condition, "model_blake3": model_hash(config.correct.condition.checkpoint())},
+        {"stage": "inpaint", "params": config.inpaint, "model_blake3": model_hash(config.inpaint.checkpoint())},
+        {"stage": "correct_output", "params": config.correct.output, "model_blake3": model_hash(config.correct.output.checkpoint())},
         {"stage": "voxelize", "params": config.voxelize},
         {"stage": "validate", "params": config.validate},
     ]);
     v.to_string()
+}
+
+/// blake3 of a stage's model file (None without a model; the file was read by validation before).
+fn model_hash(path: Option<crate::nn::ModelPath>) -> Option<String> {
+    path.and_then(|p| std::fs::read(p.as_path()).ok()).map(|bytes| blake3::hash(&bytes).to_hex().to_string())
 }

@@ -368,6 +368,7 @@ impl BuildConfig {
         }
         self.correct.condition.validate("correct.condition")?;
         self.correct.output.validate("correct.output")?;
+        self.inpaint.validate("inpaint")?;
         let v = &self.voxelize;
         if !(v.voxel.is_finite() && v.voxel >= 0.001 && v.voxel <= 1.0) {
             return bad("voxelize.voxel", "must be 0.001..=1 metres");

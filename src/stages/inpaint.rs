@@ -2,8 +2,12 @@
 
 use super::PairUnit;
 use crate::error::Result;
-use crate::inpainting::Inpainter;
+use crate::inpainting::{InpaintContext, Inpainter};
+use crate::rng::Rng;
 use crate::runtime::Stage;
+
+/// The stream of the unit's generator that stochastic inpainters draw from.
+const NOISE_STREAM: u64 = 0x1a9a_1f00;
 
 pub struct Inpaint {
     pub inpainter: Box<dyn Inpainter>,
@@ -16,7 +20,10 @@ impl Stage<PairUnit> for Inpaint {
 
     fn process(&mut self, unit: &mut PairUnit) -> Result<()> {
         let condition = unit.condition.as_ref().expect("reproject sets the condition");
-        unit.target_depth = Some(self.inpainter.inpaint(condition, &unit.known));
+        // A sub-stream of the unit's seed, apart from the pose sampler's.
+        let seed = Rng::new(unit.seed).fork(NOISE_STREAM).next_u64();
+        let ctx = InpaintContext { intrinsics: unit.k.expect("ingest sets the intrinsics"), seed };
+        unit.target_depth = Some(self.inpainter.inpaint(condition, &unit.known, &ctx));
         Ok(())
     }
 }

@@ -1,0 +1,203 @@
+//! `pointreggpt eval correction`: compare correctors on held-out label shards; `pointreggpt eval inpaint`:
+//! compare correction and fill methods against the depth captured on real sequences (tables and CSV).
+
+use crate::error::{Error, Result};
+use crate::nn::data::LabelSet;
+use crate::nn::evaluate::{evaluate_all, format_table, to_csv};
+use std::io::Write;
+use std::path::PathBuf;
+
+#[derive(Debug, clap::Args)]
+pub struct EvalArgs {
+    #[command(subcommand)]
+    pub what: EvalWhat,
+}
+
+#[derive(Debug, clap::Subcommand)]
+pub enum EvalWhat {
+    /// Compare the handcrafted filters and U-Net checkpoints on held-out correction labels.
+    Correction(EvalCorrectionArgs),
+    /// Re-project real frames into the stored pose of a later frame, correct, fill, and compare with the
+    /// depth captured there.
+    Inpaint(EvalInpaintArgs),
+}
+
+#[derive(Debug, clap::Args)]
+#[command(
+    after_help = "For each selected frame j of each sequence: the frame's points (official working resolution, depth range and \
+crop box) are z-buffered into the stored camera of frame j+GAP, corrected (none, min-pool 3.75 cm, the correction U-Net at \
+tau_m 0.99), filled (none, push-pull, diffusion) and compared with the depth captured at j+GAP, where valid. Kept pixels: \
+kept per map, wrong = more than 5 cm behind the captured surface (penetration) per map, AbsRel. Filled pixels (unknown after \
+correction, captured valid): coverage, AbsRel, RMSE, delta<1.25. The output correction of the build is not applied."
+)]
+pub struct EvalInpaintArgs {
+    /// Folder of depth sequences with poses (3DMatch / 7-Scenes / TUM / ScanNet layout).
+    pub sequences: PathBuf,
+    /// Frames between the source view and the target view.
+    #[arg(long, default_value_t = 10)]
+    pub gap: usize,
+    /// First source frame of each sequence (frames before it are skipped, e.g. the ones a model trained on).
+    #[arg(long, default_value_t = 0)]
+    pub first: usize,
+    /// Take every EVERY-th source frame.
+    #[arg(long, default_value_t = 10)]
+    pub every: usize,
+    /// At most this many views per sequence (0: no limit).
+    #[arg(long, default_value_t = 8)]
+    pub max_views: usize,
+    /// Diffusion checkpoint (`pointreggpt train diffusion --export`).
+    #[arg(long, default_value = "models/diffusion-tiny.safetensors")]
+    pub diffusion: PathBuf,
+    /// DDIM steps of the diffusion fill.
+    #[arg(long, default_value_t = 50)]
+    pub steps: usize,
+    /// Correction U-Net checkpoint (tau_m 0.99).
+    #[arg(long, default_value = "models/correction-tiny.safetensors")]
+    pub correction: PathBuf,
+    /// Seed of the diffusion noise.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// CSV file to write.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// No progress bar.
+    #[arg(long)]
+    pub quiet: bool,
+    /// libtorch intra-op threads.
+    #[arg(long, default_value_t = 1)]
+    pub torch_threads: i32,
+}
+
+#[derive(Debug, clap::Args)]
+#[command(
+    after_help = "Metrics over the pixels with input depth (I_s > 0; only those can be kept or dropped), pooled over all maps: \
+2-class mIoU (keep and drop), pixel accuracy, FP = wrong depths kept per map (label drop, predicted keep), FN = good depths \
+dropped per map, SAE = the official depth-weighted error per map. U-Nets are reported at tau_m 0.5 and 0.99; the handcrafted \
+filters (min-pool and 3x3 median, 0.0375 m) have no tau_m and are reported once."
+)]
+pub struct EvalCorrectionArgs {
+    /// Held-out label dataset(s); repeat to combine.
+    #[arg(long, required = true)]
+    pub labels: Vec<PathBuf>,
+    /// U-Net checkpoint with DepthAugment.
+    #[arg(long, default_value = "models/correction-tiny.safetensors")]
+    pub checkpoint: PathBuf,
+    /// U-Net checkpoint trained without DepthAugment (adds a row).
+    #[arg(long)]
+    pub checkpoint_noaug: Option<PathBuf>,
+    /// CSV file to write.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// cpu, cuda or cuda:N.
+    #[arg(long, default_value = "cpu")]
+    pub device: String,
+    /// Maps per forward pass.
+    #[arg(long, default_value_t = 4)]
+    pub batch: usize,
+    /// libtorch intra-op threads. 1 by default: on a shared or small machine more threads than idle cores
+    /// make libtorch's OpenMP workers spin (a 2-core machine with one other busy process ran a training step
+    /// 5-10x slower with 2 threads than with 1).
+    #[arg(long, default_value_t = 1)]
+    pub torch_threads: i32,
+}
+
+pub fn run(args: &EvalArgs, out: &mut dyn Write) -> Result<()> {
+    match &args.what {
+        EvalWhat::Correction(a) => run_correction(a, out),
+        EvalWhat::Inpaint(a) => run_inpaint(a, out),
+    }
+}
+
+fn run_correction(a: &EvalCorrectionArgs, out: &mut dyn Write) -> Result<()> {
+    let w = |e: std::io::Error| Error::io("<stdout>", e);
+    if a.torch_threads < 1 {
+        return Err(Error::config("--torch-threads", "must be at least 1"));
+    }
+    tch::set_num_threads(a.torch_threads);
+    let device = crate::nn::parse_device(&a.device)?;
+    let set = LabelSet::open_all(&a.labels)?;
+    let mut checkpoints = Vec::new();
+    if let Some(p) = &a.checkpoint_noaug {
+        checkpoints.push(("U-Net, no augmentation".to_string(), p.clone()));
+    }
+    checkpoints.push(("U-Net + DepthAugment".to_string(), a.checkpoint.clone()));
+    let rows = evaluate_all(&set, &checkpoints, device, a.batch)?;
+    let (px, drop) = set.pixel_counts();
+    writeln!(
+        out,
+        "{} maps {}x{}; {} pixels with input depth, {:.1}% labelled drop",
+        set.len(),
+        set.width,
+        set.height,
+        px,
+        100.0 * drop as f64 / px.max(1) as f64
+    )
+    .map_err(w)?;
+    write!(out, "{}", format_table(&rows)).map_err(w)?;
+    if let Some(dir) = a.out.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    }
+    std::fs::write(&a.out, to_csv(&rows)).map_err(|e| Error::io(&a.out, e))?;
+    writeln!(out, "wrote {}", a.out.display()).map_err(w)?;
+    Ok(())
+}
+
+fn run_inpaint(a: &EvalInpaintArgs, out: &mut dyn Write) -> Result<()> {
+    use crate::correction::CorrectionConfig;
+    use crate::diffusion::evaluate::{evaluate, format_table, make_view, to_csv, NamedCorrector, NamedFill};
+    use crate::inpainting::{DiffusionInpaintConfig, InpaintConfig};
+    use crate::nn::ModelPath;
+    use crate::pipeline::config::WorkingConfig;
+    let w = |e: std::io::Error| Error::io("<stdout>", e);
+    if a.torch_threads < 1 || a.gap == 0 || a.every == 0 {
+        return Err(Error::config("--gap/--every/--torch-threads", "must be at least 1"));
+    }
+    tch::set_num_threads(a.torch_threads);
+    let working = WorkingConfig::default();
+    let mut views = Vec::new();
+    for seq in crate::sources::open_sequences(&a.sequences, crate::sources::Layout::Auto)? {
+        let mut taken = 0;
+        for j in (a.first..seq.frames.len().saturating_sub(a.gap)).step_by(a.every) {
+            if a.max_views > 0 && taken == a.max_views {
+                break;
+            }
+            let (s, t) = (seq.frames[j].load()?, seq.frames[j + a.gap].load()?);
+            let seed = crate::rng::unit_seed(a.seed, &s.key, a.gap as u64);
+            views.push(make_view(&s, &t, &working, seed)?);
+            taken += 1;
+        }
+    }
+    if views.is_empty() {
+        return Err(Error::config("sequences", format!("no frame pair {} frames apart after --first {}", a.gap, a.first)));
+    }
+    let mut corrections = vec![
+        NamedCorrector { name: "none".into(), corrector: CorrectionConfig::None.build() },
+        NamedCorrector { name: "min_pool".into(), corrector: CorrectionConfig::MinPool { threshold: 0.0375 }.build() },
+    ];
+    let unet = CorrectionConfig::Unet { checkpoint: ModelPath::new(&a.correction.display().to_string()), threshold: 0.99, preset: None };
+    unet.validate("--correction")?;
+    corrections.push(NamedCorrector { name: "unet@0.99".into(), corrector: unet.build() });
+    let mut fills = vec![
+        NamedFill { name: "none".into(), inpainter: InpaintConfig::None.build()? },
+        NamedFill { name: "push_pull".into(), inpainter: InpaintConfig::PushPull.build()? },
+    ];
+    let diffusion = InpaintConfig::Diffusion(DiffusionInpaintConfig {
+        checkpoint: ModelPath::new(&a.diffusion.display().to_string()),
+        steps: a.steps,
+        eta: 1.0,
+    });
+    diffusion.validate("--diffusion")?;
+    fills.push(NamedFill { name: format!("diffusion{}", a.steps), inpainter: diffusion.build()? });
+    writeln!(out, "{} views ({} frames apart) from {}", views.len(), a.gap, a.sequences.display()).map_err(w)?;
+    let bar = crate::export::rows::progress_bar(views.len() as u64, !a.quiet, "views");
+    let range = (working.depth_range[0], working.depth_range[1]);
+    let rows = evaluate(&views, &corrections, &fills, range, || bar.inc(1));
+    bar.finish_and_clear();
+    write!(out, "{}", format_table(&rows)).map_err(w)?;
+    if let Some(dir) = a.out.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    }
+    std::fs::write(&a.out, to_csv(&rows)).map_err(|e| Error::io(&a.out, e))?;
+    writeln!(out, "wrote {}", a.out.display()).map_err(w)?;
+    Ok(())
+}

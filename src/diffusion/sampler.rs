@@ -1,0 +1,115 @@
+//! DDIM sampling with the range–null-space (DDNM) consistency step (reference §5.4).
+//!
+//! Per step `(t, t_next)`: `x0 = clamp(net(x_t, t, K), −1, 1)`; `ε = (x_t/√ᾱ_t − x0)/√(1/ᾱ_t − 1)` from the
+//! clamped, un-replaced x0; `x̂0 = M⊙y + (1 − M)⊙x0`; then `x_next = √ᾱ_next·x̂0 + c·ε + σ·z` with
+//! `σ = η·√((1 − ᾱ_t/ᾱ_next)(1 − ᾱ_next)/(1 − ᾱ_t))`, `c = √(1 − ᾱ_next − σ²)`. The result is the last x̂0,
+//! so every known pixel equals y bit for bit. All noise (the start image and every z) comes from each
+//! problem's own seeded [`Rng`], so a problem's output does not depend on the other problems of its batch
+//! or on libtorch's generator.
+
+use super::schedule::Schedule;
+use crate::nn::denoiser::Denoiser;
+use crate::rng::Rng;
+use serde::{Deserialize, Serialize};
+use tch::{Device, Kind, Tensor};
+
+/// Sampler settings.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SamplerOptions {
+    /// DDIM steps (paper 250 of T = 1000).
+    pub steps: usize,
+    /// DDIM η (official 1.0: fully stochastic).
+    pub eta: f64,
+}
+
+impl SamplerOptions {
+    /// The official sampler: 250 steps, η = 1.
+    pub const OFFICIAL: SamplerOptions = SamplerOptions { steps: 250, eta: 1.0 };
+}
+
+/// One inpainting problem at the network's resolution.
+pub struct Problem<'a> {
+    /// Known values in network space ([−1, 1]); unknown pixels are ignored.
+    pub y: &'a [f32],
+    /// Known-pixel mask M (same length as `y`).
+    pub known: &'a [bool],
+    /// Working-resolution intrinsics `[fx, fy, cx, cy]`, pixels.
+    pub intrinsics: [f64; 4],
+    /// Seed of every random draw of this problem.
+    pub seed: u64,
+}
+
+/// Samples every problem (all of size `width`×`height`) in one batch and returns x̂0 per problem in
+/// network space. H and W are padded with unknown pixels up to the U-Net's size multiple.
+pub fn ddnm_sample(
+    net: &Denoiser,
+    schedule: &Schedule,
+    opts: &SamplerOptions,
+    width: usize,
+    height: usize,
+    problems: &[Problem<'_>],
+    device: Device,
+) -> Vec<Vec<f32>> {
+    if problems.is_empty() {
+        return Vec::new();
+    }
+    let m = net.config.unet.size_multiple() as usize;
+    let (pw, ph) = (width.div_ceil(m) * m, height.div_ceil(m) * m);
+    let (b, n) = (problems.len(), pw * ph);
+    let shape = [b as i64, 1, ph as i64, pw as i64];
+    let mut y = vec![-1f32; b * n];
+    let mut known = vec![false; b * n];
+    for (i, p) in problems.iter().enumerate() {
+        assert!(p.y.len() == width * height && p.known.len() == width * height, "problem size");
+        for r in 0..height {
+            let (dst, src) = (i * n + r * pw, r * width);
+            y[dst..dst + width].copy_from_slice(&p.y[src..src + width]);
+            known[dst..dst + width].copy_from_slice(&p.known[src..src + width]);
+        }
+    }
+    let k: Vec<f32> = problems.iter().flat_map(|p| p.intrinsics.map(|v| v as f32)).collect();
+    let mut rngs: Vec<Rng> = problems.iter().map(|p| Rng::new(p.seed)).collect();
+    let noise = |rngs: &mut [Rng]| {
+        let mut buf = vec![0f32; b * n];
+        for (rng, chunk) in rngs.iter_mut().zip(buf.chunks_mut(n)) {
+            rng.fill_normal_f32(chunk);
+        }
+        Tensor::from_slice(&buf).view(shape).to_device(device)
+    };
+    let out = tch::no_grad(|| {
+        let y = Tensor::from_slice(&y).view(shape).to_device(device);
+        let known = Tensor::from_slice(&known).view(shape).to_device(device);
+        let k = Tensor::from_slice(&k).view([b as i64, 4]).to_device(device);
+        let mut x = noise(&mut rngs);
+        let mut x0 = y.shallow_clone();
+        for (t, t_next) in schedule.ddim_pairs(opts.steps) {
+            let time = Tensor::full([b as i64], t, (Kind::Int64, device));
+            let pred = net.forward(&x, &time, &k).clamp(-1.0, 1.0);
+            let ab = schedule.alpha_bar(t);
+            let eps = (&x * (1.0 / ab).sqrt() - &pred) / (1.0 / ab - 1.0).sqrt();
+            x0 = y.where_self(&known, &pred);
+            if t_next < 0 {
+                break;
+            }
+            let ab_next = schedule.alpha_bar(t_next);
+            let sigma = opts.eta * ((1.0 - ab / ab_next) * (1.0 - ab_next) / (1.0 - ab)).sqrt();
+            let c = (1.0 - ab_next - sigma * sigma).max(0.0).sqrt();
+            x = &x0 * ab_next.sqrt() + eps * c;
+            if sigma > 0.0 {
+                x += noise(&mut rngs) * sigma;
+            }
+        }
+        x0.to_device(Device::Cpu).to_kind(Kind::Float).contiguous()
+    });
+    let flat: Vec<f32> = Vec::try_from(out.flatten(0, -1)).expect("float output");
+    (0..b)
+        .map(|i| {
+            let mut v = Vec::with_capacity(width * height);
+            for r in 0..height {
+                v.extend_from_slice(&flat[i * n + r * pw..i * n + r * pw + width]);
+            }
+            v
+        })
+        .collect()
+}

@@ -1,0 +1,160 @@
+//! Evaluation of keep masks on held-out labels: handcrafted filters and U-Net checkpoints, at τ_m 0.5 and
+//! 0.99, over the pixels that have input depth; a printed table and CSV.
+
+use super::correction::{keep_probabilities, CorrectionNet};
+use super::data::LabelSet;
+use super::metrics::{Confusion, MaskMetrics};
+use crate::correction::{Corrector, MedianFilter, MinPoolFilter};
+use crate::error::{Error, Result};
+use crate::geometry::DepthMap;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use tch::Device;
+
+/// The keep thresholds τ_m reported for networks (the GIF demo's 0.5 and the generator's 0.99).
+pub const THRESHOLDS: [f32; 2] = [0.5, 0.99];
+
+/// Confusions of a network's keep probabilities at each of `thresholds`.
+pub fn evaluate_net(
+    net: &CorrectionNet,
+    device: Device,
+    set: &LabelSet,
+    batch: usize,
+    thresholds: &[f32],
+) -> Vec<Confusion> {
+    let mut out = vec![Confusion::default(); thresholds.len()];
+    for chunk in set.examples.chunks(batch.max(1) * 4) {
+        let inputs: Vec<Vec<f32>> = chunk.iter().map(|e| e.input()).collect();
+        let refs: Vec<&[f32]> = inputs.iter().map(Vec::as_slice).collect();
+        let probs = keep_probabilities(net, device, set.width, set.height, &refs, batch);
+        for ((e, input), p) in chunk.iter().zip(&inputs).zip(&probs) {
+            for (c, &t) in out.iter_mut().zip(thresholds) {
+                let pred: Vec<bool> = p.iter().zip(input).map(|(p, x)| *x == 0.0 || *p > t).collect();
+                c.add(|i| input[i] > 0.0, &e.sparse, &e.dense, &e.keep, &pred);
+            }
+        }
+    }
+    out
+}
+
+/// Confusion of any corrector (its keep mask is thresholdless).
+pub fn evaluate_corrector(corrector: &dyn Corrector, set: &LabelSet) -> Result<Confusion> {
+    let mut c = Confusion::default();
+    for e in &set.examples {
+        let input = e.input();
+        let metres: Vec<f32> = input.iter().map(|x| x * super::correction::DEPTH_SCALE_M).collect();
+        let depth = DepthMap::new(set.width as u32, set.height as u32, metres)?;
+        let keep = corrector.keep_mask(&depth);
+        c.add(|i| input[i] > 0.0, &e.sparse, &e.dense, &e.keep, &keep);
+    }
+    Ok(c)
+}
+
+/// One line of the evaluation table.
+#[derive(Clone, Debug)]
+pub struct EvalRow {
+    pub method: String,
+    /// None for thresholdless (handcrafted) methods.
+    pub tau_m: Option<f32>,
+    pub metrics: MaskMetrics,
+}
+
+/// The handcrafted baselines of the table: the official min-pool filter and a 3×3 median filter, both
+/// at 0.0375 m.
+pub fn handcrafted_rows(set: &LabelSet) -> Result<Vec<EvalRow>> {
+    let filters: [(&str, Box<dyn Corrector>); 2] = [
+        ("min-pool 3x3 (0.0375 m)", Box::new(MinPoolFilter { threshold: 0.0375 })),
+        ("median 3x3 (0.0375 m)", Box::new(MedianFilter { window: 3, threshold: 0.0375 })),
+    ];
+    filters
+        .iter()
+        .map(|(name, f)| {
+            Ok(EvalRow {
+                method: name.to_string(),
+                tau_m: None,
+                metrics: evaluate_corrector(f.as_ref(), set)?.metrics(),
+            })
+        })
+        .collect()
+}
+
+/// Rows of a checkpoint at each τ_m of [`THRESHOLDS`].
+pub fn checkpoint_rows(name: &str, path: &Path, set: &LabelSet, device: Device, batch: usize) -> Result<Vec<EvalRow>> {
+    let (_vs, net, _) = super::checkpoint::load_correction(path, device)?;
+    let confusions = evaluate_net(&net, device, set, batch, &THRESHOLDS);
+    Ok(THRESHOLDS
+        .iter()
+        .zip(confusions)
+        .map(|(&t, c)| EvalRow { method: name.to_string(), tau_m: Some(t), metrics: c.metrics() })
+        .collect())
+}
+
+/// The whole table: handcrafted filters, then each `(name, checkpoint)`.
+pub fn evaluate_all(
+    set: &LabelSet,
+    checkpoints: &[(String, PathBuf)],
+    device: Device,
+    batch: usize,
+) -> Result<Vec<EvalRow>> {
+    if set.is_empty() {
+        return Err(Error::InvalidArgument("the evaluation label set has no `ok` rows".into()));
+    }
+    let mut rows = handcrafted_rows(set)?;
+    for (name, path) in checkpoints {
+        rows.extend(checkpoint_rows(name, path, set, device, batch)?);
+    }
+    Ok(rows)
+}
+
+/// A fixed-width text table of the rows.
+pub fn format_table(rows: &[EvalRow]) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "{:<34} {:>6} {:>7} {:>9} {:>10} {:>10} {:>10}",
+        "method", "tau_m", "mIoU", "accuracy", "FP/map", "FN/map", "SAE/map m"
+    );
+    for r in rows {
+        let m = &r.metrics;
+        let tau = r.tau_m.map_or("-".to_string(), |t| format!("{t}"));
+        let _ = writeln!(
+            s,
+            "{:<34} {:>6} {:>7.2} {:>9.2} {:>10.1} {:>10.1} {:>10.1}",
+            r.method,
+            tau,
+            100.0 * m.miou,
+            100.0 * m.accuracy,
+            m.fp_per_map,
+            m.fn_per_map,
+            m.sae_per_map
+        );
+    }
+    s
+}
+
+/// CSV of the rows (percentages as fractions in [0, 1]; empty `tau_m` for thresholdless methods).
+pub fn to_csv(rows: &[EvalRow]) -> String {
+    let mut s = String::from(
+        "method,tau_m,miou,iou_keep,iou_drop,pixel_accuracy,fp_per_map,fn_per_map,sae_per_map_m,maps,pixels\n",
+    );
+    for r in rows {
+        let m = &r.metrics;
+        let tau = r.tau_m.map_or(String::new(), |t| format!("{t}"));
+        let _ = writeln!(
+            s,
+            "\"{}\",{},{:.6},{:.6},{:.6},{:.6},{:.3},{:.3},{:.3},{},{}",
+            r.method.replace('"', "'"),
+            tau,
+            m.miou,
+            m.iou_keep,
+            m.iou_drop,
+            m.accuracy,
+            m.fp_per_map,
+            m.fn_per_map,
+            m.sae_per_map,
+            m.maps,
+            m.pixels
+        );
+    }
+    s
+}

@@ -1,0 +1,62 @@
+//! Neural networks on libtorch (tch): the shared U-Net skeleton, the depth-correction network (with its
+//! checkpoints, training and evaluation) and the diffusion denoiser (schedule, sampler and training live
+//! in [`crate::diffusion`]).
+//!
+//! Layout (one layer per file, inference apart from training, so pipeline stages depend only on the
+//! inference modules):
+//! - layers: [`ws_conv`] (weight-standardised conv), [`norm`] (channel LayerNorm), [`resnet`] (Block and
+//!   ResnetBlock with optional FiLM), [`attention`] (linear and full attention, pre-norm residual);
+//! - models: [`unet`] (the skeleton of reference §4.1 / §5.1 with its presets), [`augment`]
+//!   (DepthAugment), [`correction`] (`CorrectionNet` and the [`crate::correction::Corrector`] wrapper),
+//!   [`denoiser`] (the diffusion U-Net with time and intrinsics FiLM conditioning);
+//! - I/O: [`checkpoint`] (safetensors with the config in the header metadata; the authors' key layout);
+//! - training and evaluation: [`data`] (label shards to tensors), [`metrics`], [`train`], [`evaluate`].
+//!
+//! Variable names follow the authors' PyTorch state-dict keys (`init_conv.weight`,
+//! `downs.0.0.block1.proj.weight`, ..., `final_conv.0.weight`), so a converted `model-best.pt` loads
+//! without renaming.
+
+pub mod attention;
+pub mod augment;
+pub mod checkpoint;
+pub mod correction;
+pub mod data;
+pub mod denoiser;
+pub mod evaluate;
+pub mod init;
+pub mod metrics;
+pub mod model_path;
+pub mod norm;
+pub mod resnet;
+pub mod train;
+pub mod unet;
+pub mod ws_conv;
+
+pub use augment::depth_augment;
+pub use checkpoint::{load_correction, save_correction, CheckpointMeta};
+pub use correction::{CorrectionNet, CorrectionNetConfig, UnetCorrector};
+pub use model_path::ModelPath;
+pub use unet::{Preset, Unet, UnetConfig};
+
+/// Parses a device name: `cpu`, `cuda` (the first GPU) or `cuda:N`.
+pub fn parse_device(name: &str) -> crate::Result<tch::Device> {
+    match name {
+        "cpu" => Ok(tch::Device::Cpu),
+        "cuda" => cuda(0),
+        s => match s.strip_prefix("cuda:").and_then(|n| n.parse::<usize>().ok()) {
+            Some(n) => cuda(n),
+            None => Err(crate::Error::config("--device", format!("unknown device `{s}` (cpu, cuda, cuda:N)"))),
+        },
+    }
+}
+
+fn cuda(n: usize) -> crate::Result<tch::Device> {
+    if tch::Cuda::device_count() as usize > n {
+        Ok(tch::Device::Cuda(n))
+    } else {
+        Err(crate::Error::config(
+            "--device",
+            format!("CUDA device {n} is not available (libtorch sees {} GPUs)", tch::Cuda::device_count()),
+        ))
+    }
+}

@@ -1,0 +1,347 @@
+//! Diffusion inpainting: the exact consistency step, seeded sampling, training lowers the loss, checkpoint
+//! and resume round trips, the authors' key layout, the build with `inpaint = "diffusion"`, and
+//! `eval inpaint` on real frames.
+
+mod support;
+
+use pointreggpt::diffusion::checkpoint::{export_ema, load_denoiser, sorted_variables, EMA};
+use pointreggpt::diffusion::data::{to_network, FrameSet, TrainFrame};
+use pointreggpt::diffusion::train::{batch_loss, train_diffusion, DiffusionTrainOptions, Weighting, LATEST};
+use pointreggpt::diffusion::{ddnm_sample, Problem, SamplerOptions, Schedule};
+use pointreggpt::geometry::{DepthMap, Intrinsics};
+use pointreggpt::inpainting::{DiffusionInpainter, InpaintContext, Inpainter};
+use pointreggpt::nn::checkpoint::write_safetensors;
+use pointreggpt::nn::denoiser::{Denoiser, DenoiserConfig};
+use pointreggpt::nn::Preset;
+use pointreggpt::pipeline::{run_build, BuildConfig, BuildOptions};
+use pointreggpt::rng::Rng;
+use pointreggpt::runtime::CancelToken;
+use pointreggpt::shards::dataset::Dataset;
+use pointreggpt::sources::depth_png::decode_depth_png;
+use std::collections::BTreeMap;
+use std::path::Path;
+use tch::{nn, Device, Kind, Tensor};
+
+fn tiny(seed: i64) -> (nn::VarStore, Denoiser) {
+    tch::manual_seed(seed);
+    let vs = nn::VarStore::new(Device::Cpu);
+    let net = Denoiser::new(&vs.root(), &DenoiserConfig::from_preset(Preset::Tiny)).unwrap();
+    (vs, net)
+}
+
+/// A random inpainting problem of `w`×`h`: smooth depth in network space, `known_rate` of it known.
+fn problem_data(w: usize, h: usize, known_rate: f64, seed: u64) -> (Vec<f32>, Vec<bool>) {
+    let mut r = Rng::new(seed);
+    let y = (0..w * h).map(|i| to_network(1.0 + (i % w) as f32 * 0.01 + r.uniform() as f32 * 0.05)).collect();
+    let known = (0..w * h).map(|_| r.uniform() < known_rate).collect();
+    (y, known)
+}
+
+const K: [f64; 4] = [30.0, 30.0, 16.0, 12.0];
+
+#[test]
+fn known_pixels_are_bit_identical_and_the_seed_fixes_the_rest() {
+    let (_vs, net) = tiny(0);
+    let s = Schedule::official();
+    let (w, h) = (30, 22); // not a multiple of 8: the sampler pads
+    let (y1, m1) = problem_data(w, h, 0.6, 1);
+    let (y2, m2) = problem_data(w, h, 0.3, 2);
+    let opts = SamplerOptions { steps: 4, eta: 1.0 };
+    let both = ddnm_sample(&net, &s, &opts, w, h, &[p(&y1, &m1, 5), p(&y2, &m2, 6)], Device::Cpu);
+    for (out, (y, m)) in both.iter().zip([(&y1, &m1), (&y2, &m2)]) {
+        assert_eq!(out.len(), w * h);
+        for i in 0..w * h {
+            if m[i] {
+                assert_eq!(out[i].to_bits(), y[i].to_bits(), "known pixel {i}");
+            } else {
+                assert!((-1.0..=1.0).contains(&out[i]), "clamped x0");
+            }
+        }
+    }
+    // The same seed gives the same output, alone or in a batch; another seed another one.
+    let alone = ddnm_sample(&net, &s, &opts, w, h, &[p(&y1, &m1, 5)], Device::Cpu);
+    let again = ddnm_sample(&net, &s, &opts, w, h, &[p(&y1, &m1, 5)], Device::Cpu);
+    assert_eq!(alone, again);
+    let max_diff = alone[0].iter().zip(&both[0]).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max);
+    assert!(max_diff < 1e-4, "batched and alone differ by {max_diff}");
+    let other = ddnm_sample(&net, &s, &opts, w, h, &[p(&y1, &m1, 7)], Device::Cpu);
+    let unknown_diff = (0..w * h).filter(|&i| !m1[i] && other[0][i] != alone[0][i]).count();
+    assert!(unknown_diff > (w * h) / 4, "another seed changed only {unknown_diff} pixels");
+}
+
+fn p<'a>(y: &'a [f32], known: &'a [bool], seed: u64) -> Problem<'a> {
+    Problem { y, known, intrinsics: K, seed }
+}
+
+#[test]
+fn the_inpainter_keeps_metric_depths_exactly_and_fills_the_holes() {
+    let (vs, net) = tiny(3);
+    let inpainter = DiffusionInpainter::new(vs, net, SamplerOptions { steps: 3, eta: 1.0 });
+    let (w, h) = (32u32, 24u32);
+    let mut r = Rng::new(9);
+    let data: Vec<f32> = (0..w * h).map(|_| r.uniform_range(0.6, 4.0) as f32).collect();
+    let known: Vec<bool> = (0..w * h).map(|_| r.uniform() < 0.5).collect();
+    let d = DepthMap::new(w, h, data.clone()).unwrap();
+    let ctx = InpaintContext { intrinsics: Intrinsics::new(30.0, 30.0, 16.0, 12.0, w, h).unwrap(), seed: 4 };
+    let out = inpainter.inpaint(&d, &known, &ctx);
+    for i in 0..(w * h) as usize {
+        if known[i] {
+            assert_eq!(out.data()[i].to_bits(), data[i].to_bits());
+        } else {
+            assert!((0.0..=10.0).contains(&out.data()[i]));
+        }
+    }
+    assert_eq!(out, inpainter.inpaint(&d, &known, &ctx), "same seed, same output");
+}
+
+/// Frames of 2 synthetic scenes at 64x64 (official intrinsics map), every 10th of 40.
+fn small_frames() -> FrameSet {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = dir.path().join("frames.toml");
+    std::fs::write(&cfg, format!("{}[working]\nsize = 64\n", support::synthetic_config(2, 40, 10, 1, 640, 480, 8))).unwrap();
+    FrameSet::load(&[cfg], false).unwrap()
+}
+
+fn opts(out: &Path, steps: u64) -> DiffusionTrainOptions {
+    let mut o = DiffusionTrainOptions::for_preset(Preset::Tiny, out.to_path_buf());
+    o.steps = steps;
+    o.batch = 4;
+    o.crop = Some(32);
+    o.checkpoint_every = 2;
+    o.ema_after = 1;
+    o.ema_every = 1;
+    o.seed = 5;
+    o
+}
+
+/// The loss of `net` on a fixed set of (frame, t, noise) draws.
+fn fixed_loss(net: &Denoiser, data: &FrameSet) -> f64 {
+    let s = Schedule::official();
+    tch::manual_seed(99);
+    let n = data.len().min(8);
+    let x: Vec<f32> = data.frames[..n].iter().flat_map(|f| f.depth.clone()).collect();
+    let x0 = Tensor::from_slice(&x).view([n as i64, 1, data.height as i64, data.width as i64]);
+    let k: Vec<f32> = data.frames[..n].iter().flat_map(|f| f.intrinsics.map(|v| v as f32)).collect();
+    let k = Tensor::from_slice(&k).view([n as i64, 4]);
+    let t: Vec<i64> = (0..n as i64).map(|i| 20 + 110 * i).collect();
+    tch::no_grad(|| batch_loss(net, &s, Weighting::MinSnr, &x0, &k, &t).double_value(&[]))
+}
+
+#[test]
+fn training_lowers_the_loss_and_resume_equals_an_uninterrupted_run() {
+    let data = small_frames();
+    assert_eq!((data.width, data.height, data.len()), (64, 64, 8));
+    assert!(data.frames.iter().all(|f| f.depth.iter().any(|v| *v > -1.0)));
+
+    // 60 steps lower the loss on fixed draws (the initial network is the training run's: same seed).
+    let dir = tempfile::tempdir().unwrap();
+    let mut o = opts(dir.path(), 60);
+    o.checkpoint_every = 60;
+    train_diffusion(&data, &o, |_| {}).unwrap();
+    let (_v0, init) = {
+        tch::manual_seed(o.seed as i64);
+        let vs = nn::VarStore::new(Device::Cpu);
+        let net = Denoiser::new(&vs.root(), &DenoiserConfig::from_preset(Preset::Tiny)).unwrap();
+        (vs, net)
+    };
+    let (_v1, trained, meta) = load_denoiser(&dir.path().join(LATEST), Device::Cpu).unwrap();
+    assert_eq!(meta.step, 60);
+    // load_denoiser takes the EMA; compare the online weights too.
+    let before = fixed_loss(&init, &data);
+    let after = fixed_loss(&trained, &data);
+    assert!(after < 0.7 * before, "loss {before} -> {after}");
+
+    // 4 steps in one go, or 2 then a resume to 4: the same model, EMA and Adam state, bit for bit.
+    let a = tempfile::tempdir().unwrap();
+    train_diffusion(&data, &opts(a.path(), 4), |_| {}).unwrap();
+    let b = tempfile::tempdir().unwrap();
+    train_diffusion(&data, &opts(b.path(), 2), |_| {}).unwrap();
+    let mut resumed = opts(b.path(), 4);
+    resumed.resume = true;
+    let report = train_diffusion(&data, &resumed, |_| {}).unwrap();
+    assert_eq!(report.first_step, 3);
+    let ta = Tensor::read_safetensors(a.path().join(LATEST)).unwrap();
+    let tb: BTreeMap<String, Tensor> = Tensor::read_safetensors(b.path().join(LATEST)).unwrap().into_iter().collect();
+    assert!(ta.len() > 100 && ta.len() == tb.len());
+    assert!(ta.iter().any(|(k, _)| k.starts_with("opt.v.")) && ta.iter().any(|(k, _)| k.starts_with(EMA)));
+    for (k, t) in &ta {
+        assert!(t.equal(&tb[k]), "tensor {k} differs after resume");
+    }
+    // And a different seed trains to a different model (the comparison above can fail).
+    let c = tempfile::tempdir().unwrap();
+    let mut other = opts(c.path(), 4);
+    other.seed = 6;
+    train_diffusion(&data, &other, |_| {}).unwrap();
+    let tc: BTreeMap<String, Tensor> = Tensor::read_safetensors(c.path().join(LATEST)).unwrap().into_iter().collect();
+    assert!(ta.iter().any(|(k, t)| !t.equal(&tc[k])));
+
+    // The exported EMA file loads to the same network as the full checkpoint.
+    let small = a.path().join("ema.safetensors");
+    export_ema(&a.path().join(LATEST), &small).unwrap();
+    let (_va, full, _) = load_denoiser(&a.path().join(LATEST), Device::Cpu).unwrap();
+    let (_vb, exported, _) = load_denoiser(&small, Device::Cpu).unwrap();
+    let x = Tensor::randn([1, 1, 32, 32], (Kind::Float, Device::Cpu));
+    let t = Tensor::from_slice(&[100i64]);
+    let k = Tensor::from_slice(&[30f32, 30.0, 16.0, 16.0]).view([1, 4]);
+    let (ya, yb) = tch::no_grad(|| (full.forward(&x, &t, &k), exported.forward(&x, &t, &k)));
+    assert!(ya.equal(&yb));
+    assert!(std::fs::metadata(&small).unwrap().len() * 3 < std::fs::metadata(a.path().join(LATEST)).unwrap().len() + 1);
+}
+
+#[test]
+fn the_authors_key_layout_loads_without_metadata() {
+    // A paper-size network saved as a converted official checkpoint: EMA weights under
+    // `ema.ema_model.model.`, the online ones under `model.model.`, the GaussianDiffusion buffers beside them.
+    let (vs, net) = {
+        tch::manual_seed(2);
+        let vs = nn::VarStore::new(Device::Cpu);
+        let mut cfg = DenoiserConfig::from_preset(Preset::Paper);
+        // Keep the test quick: paper topology at a quarter of the width, raw intrinsics as the authors.
+        cfg.unet.dim = 16;
+        cfg.unet.cond_dim = Some(128);
+        cfg.intrinsics_scale = 1.0;
+        cfg.preset = None;
+        let net = Denoiser::new(&vs.root(), &cfg).unwrap();
+        (vs, net)
+    };
+    let mut tensors: Vec<(String, Tensor)> = Vec::new();
+    for (k, t) in sorted_variables(&vs) {
+        tensors.push((format!("ema.ema_model.model.{k}"), t.shallow_clone()));
+        tensors.push((format!("model.model.{k}"), t.zeros_like()));
+    }
+    tensors.push(("model.betas".into(), Tensor::zeros([1000], (Kind::Float, Device::Cpu))));
+    tensors.push(("ema.step".into(), Tensor::zeros([1], (Kind::Float, Device::Cpu))));
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("official.safetensors");
+    write_safetensors(&path, &tensors, &BTreeMap::new()).unwrap();
+    let (_v, loaded, meta) = load_denoiser(&path, Device::Cpu).unwrap();
+    assert_eq!(meta.net, net.config, "inferred config");
+    let x = Tensor::randn([1, 1, 16, 16], (Kind::Float, Device::Cpu));
+    let t = Tensor::from_slice(&[500i64]);
+    let k = Tensor::from_slice(&[311.7f32, 312.0, 128.5, 128.0]).view([1, 4]);
+    let (a, b) = tch::no_grad(|| (net.forward(&x, &t, &k), loaded.forward(&x, &t, &k)));
+    assert!(a.equal(&b), "EMA weights were not the ones loaded");
+    // A correction checkpoint is refused with the reason.
+    std::fs::write(&path, b"not a file").unwrap();
+    assert!(load_denoiser(&path, Device::Cpu).unwrap_err().to_string().contains("official.safetensors"));
+}
+
+#[test]
+fn a_build_with_the_diffusion_fill_keeps_the_condition_and_is_deterministic_across_threads() {
+    // An untrained tiny denoiser: the test is about wiring, exactness and determinism, not realism.
+    let dir = tempfile::tempdir().unwrap();
+    let (vs, _net) = tiny(7);
+    let ckpt = dir.path().join("denoiser.safetensors");
+    let meta = pointreggpt::diffusion::checkpoint::DiffusionMeta {
+        format: pointreggpt::diffusion::checkpoint::FORMAT.into(),
+        net: DenoiserConfig::from_preset(Preset::Tiny),
+        step: 0,
+        info: serde_json::Value::Null,
+    };
+    pointreggpt::diffusion::checkpoint::save(&ckpt, &meta, &[], &sorted_variables(&vs), &[]).unwrap();
+    let cfg = dir.path().join("build.toml");
+    std::fs::write(
+        &cfg,
+        format!(
+            "{}[working]\nsize = 64\n[inpaint]\nmethod = \"diffusion\"\ncheckpoint = {:?}\nsteps = 3\n[correct.output]\nmethod = \"none\"\n[output]\ndepth_maps = true\n",
+            support::synthetic_config(1, 30, 10, 2, 640, 480, 4),
+            ckpt.display().to_string()
+        ),
+    )
+    .unwrap();
+    let text = std::fs::read_to_string(&cfg).unwrap();
+    let config = BuildConfig::from_toml(&text, "test").unwrap();
+    let mut digests = Vec::new();
+    for threads in [1, 2] {
+        let out = dir.path().join(format!("ds{threads}"));
+        let opts = BuildOptions { out: out.clone(), worker: 0, workers: 1, strict: true, progress: false };
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        pool.install(|| run_build(&config, &opts, &CancelToken::new())).unwrap();
+        let rows = Dataset::open(&out).unwrap().read_pairs().unwrap();
+        assert_eq!(rows.len(), 6, "3 frames x 2 samples");
+        let mut checked = 0;
+        for r in &rows {
+            assert!(r.stages.contains("\"diffusion\"") && r.stages.contains("model_blake3"), "{}", r.stages);
+            if r.condition_depth_png.is_empty() {
+                continue;
+            }
+            let c = decode_depth_png(&r.condition_depth_png, Path::new("condition")).unwrap();
+            let t = decode_depth_png(&r.target_depth_png, Path::new("target")).unwrap();
+            let known = c.data.iter().filter(|v| **v > 0).count();
+            assert!(known > 100);
+            for (cv, tv) in c.data.iter().zip(&t.data) {
+                if *cv > 0 {
+                    assert_eq!(cv, tv, "a known pixel changed");
+                }
+            }
+            // The model filled (some of) the rest.
+            assert!(t.data.iter().filter(|v| **v > 0).count() > known);
+            checked += 1;
+        }
+        assert!(checked >= 4);
+        digests.push(rows.iter().map(|r| (r.unit_index, r.content_digest().to_hex().to_string())).collect::<BTreeMap<_, _>>());
+    }
+    assert_eq!(digests[0], digests[1], "1 and 2 threads give different pairs");
+}
+
+#[test]
+fn eval_inpaint_on_real_frames_scores_every_method() {
+    let Some(real) = support::real_data() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let (vs, _net) = tiny(8);
+    let ckpt = dir.path().join("denoiser.safetensors");
+    let meta = pointreggpt::diffusion::checkpoint::DiffusionMeta {
+        format: pointreggpt::diffusion::checkpoint::FORMAT.into(),
+        net: DenoiserConfig::from_preset(Preset::Tiny),
+        step: 0,
+        info: serde_json::Value::Null,
+    };
+    pointreggpt::diffusion::checkpoint::save(&ckpt, &meta, &[], &sorted_variables(&vs), &[]).unwrap();
+    let csv = dir.path().join("eval.csv");
+    let o = support::bin()
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .args(["eval", "inpaint"])
+        .arg(real.join("7scenes-redkitchen"))
+        .args(["--gap", "10", "--first", "300", "--every", "20", "--max-views", "3", "--steps", "2", "--quiet"])
+        .arg("--diffusion")
+        .arg(&ckpt)
+        .arg("--out")
+        .arg(&csv)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let rows: Vec<Vec<String>> = text.lines().skip(1).map(|l| l.split(',').map(String::from).collect()).collect();
+    assert_eq!(rows.len(), 9, "{text}");
+    let get = |c: &str, f: &str, col: usize| -> f64 {
+        rows.iter().find(|r| r[0] == c && r[1].starts_with(f)).unwrap_or_else(|| panic!("{c}/{f}"))[col].parse().unwrap()
+    };
+    for c in ["none", "min_pool", "unet@0.99"] {
+        assert_eq!(get(c, "none", 2), 3.0);
+        // No fill covers nothing; push-pull and diffusion fill nearly every unknown pixel the sensor saw.
+        assert_eq!(get(c, "none", 6), 0.0);
+        assert!(get(c, "push_pull", 6) > 0.9, "{text}");
+        assert!(get(c, "diffusion", 6) > 0.5, "{text}");
+        // The kept pixels do not depend on the fill.
+        assert_eq!(get(c, "none", 3), get(c, "diffusion", 3));
+    }
+    // Re-projection 10 frames apart with the stored poses: kept depths mostly right.
+    for c in ["none", "min_pool"] {
+        assert!(get(c, "none", 5) < 0.05, "{text}");
+    }
+    // Corrections drop pixels, and the penetrations among them.
+    assert!(get("min_pool", "none", 3) < get("none", "none", 3));
+    assert!(get("min_pool", "none", 4) <= get("none", "none", 4));
+}
+
+#[test]
+fn frames_load_from_a_sequence_folder_in_network_space() {
+    let Some(real) = support::real_data() else { return };
+    let set = FrameSet::load(&[real.join("sun3d-studyroom-5frames")], false).unwrap();
+    assert_eq!((set.len(), set.width, set.height), (5, 256, 256));
+    let f: &TrainFrame = &set.frames[0];
+    assert!(f.depth.iter().all(|v| (-1.0..=1.0).contains(v)));
+    assert!(f.depth.iter().filter(|v| **v > -1.0).count() > 256 * 128);
+    // Official intrinsics map: principal point (128.5, 128).
+    assert_eq!((f.intrinsics[2], f.intrinsics[3]), (128.5, 128.0));
+}
