@@ -39,6 +39,7 @@ test: libtorch test-deps
 
 bench-deps:
 	./scripts/install-bench-peers.sh
+	./scripts/install-network-peers.sh
 
 # Every benchmark and its peers in one run; writes benchmarks/REPORT.md.
 bench: libtorch bench-deps test-deps

@@ -9,10 +9,10 @@ use pointreggpt::diffusion::data::{to_network, FrameSet, TrainFrame};
 use pointreggpt::diffusion::train::{batch_loss, train_diffusion, DiffusionTrainOptions, Weighting, LATEST};
 use pointreggpt::diffusion::{ddnm_sample, Problem, SamplerOptions, Schedule};
 use pointreggpt::geometry::{DepthMap, Intrinsics};
-use pointreggpt::inpainting::{DiffusionInpainter, InpaintContext, Inpainter};
+use pointreggpt::inpainting::{DiffusionInpaintConfig, DiffusionInpainter, InpaintContext, Inpainter, Start};
 use pointreggpt::nn::checkpoint::write_safetensors;
 use pointreggpt::nn::denoiser::{Denoiser, DenoiserConfig};
-use pointreggpt::nn::Preset;
+use pointreggpt::nn::{ModelPath, Preset};
 use pointreggpt::pipeline::{run_build, BuildConfig, BuildOptions};
 use pointreggpt::rng::Rng;
 use pointreggpt::runtime::CancelToken;
@@ -46,7 +46,7 @@ fn known_pixels_are_bit_identical_and_the_seed_fixes_the_rest() {
     let (w, h) = (30, 22); // not a multiple of 8: the sampler pads
     let (y1, m1) = problem_data(w, h, 0.6, 1);
     let (y2, m2) = problem_data(w, h, 0.3, 2);
-    let opts = SamplerOptions { steps: 4, eta: 1.0 };
+    let opts = SamplerOptions { steps: 4, eta: 1.0, start_step: None };
     let both = ddnm_sample(&net, &s, &opts, w, h, &[p(&y1, &m1, 5), p(&y2, &m2, 6)], Device::Cpu);
     for (out, (y, m)) in both.iter().zip([(&y1, &m1), (&y2, &m2)]) {
         assert_eq!(out.len(), w * h);
@@ -64,19 +64,26 @@ fn known_pixels_are_bit_identical_and_the_seed_fixes_the_rest() {
     assert_eq!(alone, again);
     let max_diff = alone[0].iter().zip(&both[0]).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max);
     assert!(max_diff < 1e-4, "batched and alone differ by {max_diff}");
+    // Started from a noised initial estimate (not the official sampler): known pixels stay exact.
+    let init: Vec<f32> = y1.iter().zip(&m1).map(|(v, k)| if *k { *v } else { to_network(2.0) }).collect();
+    let mut from_init = p(&y1, &m1, 5);
+    from_init.init = Some(&init);
+    let started = ddnm_sample(&net, &s, &SamplerOptions { steps: 3, eta: 1.0, start_step: Some(200) }, w, h, &[from_init], Device::Cpu);
+    assert!((0..w * h).all(|i| !m1[i] || started[0][i].to_bits() == y1[i].to_bits()));
+    assert_ne!(started[0], alone[0]);
     let other = ddnm_sample(&net, &s, &opts, w, h, &[p(&y1, &m1, 7)], Device::Cpu);
     let unknown_diff = (0..w * h).filter(|&i| !m1[i] && other[0][i] != alone[0][i]).count();
     assert!(unknown_diff > (w * h) / 4, "another seed changed only {unknown_diff} pixels");
 }
 
 fn p<'a>(y: &'a [f32], known: &'a [bool], seed: u64) -> Problem<'a> {
-    Problem { y, known, intrinsics: K, seed }
+    Problem { y, known, intrinsics: K, seed, init: None }
 }
 
 #[test]
 fn the_inpainter_keeps_metric_depths_exactly_and_fills_the_holes() {
     let (vs, net) = tiny(3);
-    let inpainter = DiffusionInpainter::new(vs, net, SamplerOptions { steps: 3, eta: 1.0 });
+    let inpainter = DiffusionInpainter::new(vs, net, SamplerOptions { steps: 3, eta: 1.0, start_step: None });
     let (w, h) = (32u32, 24u32);
     let mut r = Rng::new(9);
     let data: Vec<f32> = (0..w * h).map(|_| r.uniform_range(0.6, 4.0) as f32).collect();
@@ -312,7 +319,7 @@ fn eval_inpaint_on_real_frames_scores_every_method() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let text = std::fs::read_to_string(&csv).unwrap();
     let rows: Vec<Vec<String>> = text.lines().skip(1).map(|l| l.split(',').map(String::from).collect()).collect();
-    assert_eq!(rows.len(), 9, "{text}");
+    assert_eq!(rows.len(), 12, "{text}");
     let get = |c: &str, f: &str, col: usize| -> f64 {
         rows.iter().find(|r| r[0] == c && r[1].starts_with(f)).unwrap_or_else(|| panic!("{c}/{f}"))[col].parse().unwrap()
     };
@@ -344,4 +351,52 @@ fn frames_load_from_a_sequence_folder_in_network_space() {
     assert!(f.depth.iter().filter(|v| **v > -1.0).count() > 256 * 128);
     // Official intrinsics map: principal point (128.5, 128).
     assert_eq!((f.intrinsics[2], f.intrinsics[3]), (128.5, 128.0));
+}
+
+#[test]
+fn a_torchscript_denoiser_samples_like_the_native_one() {
+    // Trace the native network into TorchScript at the padded size the inpainter will use (32x32), save it,
+    // and load it through the build's config: same output as the native inpainter, known pixels exact.
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("denoiser.pt");
+    let (mut vs, net) = tiny(11);
+    vs.freeze(); // traced weights become constants: they must not require gradients
+    {
+        let inputs = [
+            Tensor::randn([1, 1, 32, 32], (Kind::Float, Device::Cpu)),
+            Tensor::from_slice(&[10i64]),
+            Tensor::from_slice(&[30f32, 30.0, 16.0, 12.0]).view([1, 4]),
+        ];
+        let mut trace = |x: &[Tensor]| vec![net.forward(&x[0], &x[1], &x[2])];
+        let module = tch::CModule::create_by_tracing("Denoiser", "forward", &inputs, &mut trace).unwrap();
+        module.save(&path).unwrap();
+    }
+    let sampler = SamplerOptions { steps: 3, eta: 1.0, start_step: None };
+    let native = DiffusionInpainter::new(vs, net, sampler);
+    let config = DiffusionInpaintConfig { checkpoint: ModelPath::new(path.to_str().unwrap()), steps: 3, eta: 1.0, start: Start::Noise, start_step: 500 };
+    config.validate("inpaint").unwrap();
+    let scripted = DiffusionInpainter::load(&config, Device::Cpu).unwrap();
+    let (w, h) = (32u32, 24u32);
+    let mut r = Rng::new(12);
+    let data: Vec<f32> = (0..w * h).map(|_| r.uniform_range(0.6, 4.0) as f32).collect();
+    let known: Vec<bool> = (0..w * h).map(|_| r.uniform() < 0.5).collect();
+    let d = DepthMap::new(w, h, data.clone()).unwrap();
+    let ctx = InpaintContext { intrinsics: Intrinsics::new(30.0, 30.0, 16.0, 12.0, w, h).unwrap(), seed: 4 };
+    // The native network pads 24 rows to 24 (multiple of 8), TorchScript to 32: compare the TorchScript
+    // output with a native run on the same 32x32 padding instead.
+    let d32 = DepthMap::new(w, 32, data.iter().copied().chain(std::iter::repeat(0.0).take((w * 8) as usize)).collect()).unwrap();
+    let known32: Vec<bool> = known.iter().copied().chain(std::iter::repeat(false).take((w * 8) as usize)).collect();
+    let ctx32 = InpaintContext { intrinsics: Intrinsics::new(30.0, 30.0, 16.0, 12.0, w, 32).unwrap(), seed: 4 };
+    let a = native.inpaint(&d32, &known32, &ctx32);
+    let b = scripted.inpaint(&d, &known, &ctx);
+    for i in 0..(w * h) as usize {
+        if known[i] {
+            assert_eq!(b.data()[i].to_bits(), data[i].to_bits());
+        }
+        assert!((a.data()[i] - b.data()[i]).abs() < 1e-4, "pixel {i}: {} vs {}", a.data()[i], b.data()[i]);
+    }
+    // A file that is neither safetensors nor TorchScript is refused with its name.
+    std::fs::write(&path, b"PK\x03\x04 broken").unwrap();
+    let err = DiffusionInpaintConfig { checkpoint: ModelPath::new(path.to_str().unwrap()), steps: 3, eta: 1.0, start: Start::Noise, start_step: 500 }.validate("inpaint").unwrap_err();
+    assert!(err.to_string().contains("denoiser.pt"), "{err}");
 }

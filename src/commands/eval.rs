@@ -26,7 +26,7 @@ pub enum EvalWhat {
 #[command(
     after_help = "For each selected frame j of each sequence: the frame's points (official working resolution, depth range and \
 crop box) are z-buffered into the stored camera of frame j+GAP, corrected (none, min-pool 3.75 cm, the correction U-Net at \
-tau_m 0.99), filled (none, push-pull, diffusion) and compared with the depth captured at j+GAP, where valid. Kept pixels: \
+tau_m 0.99), filled (none, push-pull, diffusion from pure noise as the authors, diffusion started from the noised push-pull fill) and compared with the depth captured at j+GAP, where valid. Kept pixels: \
 kept per map, wrong = more than 5 cm behind the captured surface (penetration) per map, AbsRel. Filled pixels (unknown after \
 correction, captured valid): coverage, AbsRel, RMSE, delta<1.25. The output correction of the build is not applied."
 )]
@@ -51,6 +51,9 @@ pub struct EvalInpaintArgs {
     /// DDIM steps of the diffusion fill.
     #[arg(long, default_value_t = 50)]
     pub steps: usize,
+    /// The step the `push_pull`-started diffusion rows are noised to (the official rows start from pure noise).
+    #[arg(long, default_value_t = 500)]
+    pub start_step: usize,
     /// Correction U-Net checkpoint (tau_m 0.99).
     #[arg(long, default_value = "models/correction-tiny.safetensors")]
     pub correction: PathBuf,
@@ -145,7 +148,7 @@ fn run_correction(a: &EvalCorrectionArgs, out: &mut dyn Write) -> Result<()> {
 fn run_inpaint(a: &EvalInpaintArgs, out: &mut dyn Write) -> Result<()> {
     use crate::correction::CorrectionConfig;
     use crate::diffusion::evaluate::{evaluate, format_table, make_view, to_csv, NamedCorrector, NamedFill};
-    use crate::inpainting::{DiffusionInpaintConfig, InpaintConfig};
+    use crate::inpainting::{DiffusionInpaintConfig, InpaintConfig, Start};
     use crate::nn::ModelPath;
     use crate::pipeline::config::WorkingConfig;
     let w = |e: std::io::Error| Error::io("<stdout>", e);
@@ -181,13 +184,17 @@ fn run_inpaint(a: &EvalInpaintArgs, out: &mut dyn Write) -> Result<()> {
         NamedFill { name: "none".into(), inpainter: InpaintConfig::None.build()? },
         NamedFill { name: "push_pull".into(), inpainter: InpaintConfig::PushPull.build()? },
     ];
-    let diffusion = InpaintConfig::Diffusion(DiffusionInpaintConfig {
-        checkpoint: ModelPath::new(&a.diffusion.display().to_string()),
-        steps: a.steps,
-        eta: 1.0,
-    });
-    diffusion.validate("--diffusion")?;
-    fills.push(NamedFill { name: format!("diffusion{}", a.steps), inpainter: diffusion.build()? });
+    for (start, name) in [(Start::Noise, format!("diffusion{}", a.steps)), (Start::PushPull, format!("diff{}/pp{}", a.steps, a.start_step))] {
+        let diffusion = InpaintConfig::Diffusion(DiffusionInpaintConfig {
+            checkpoint: ModelPath::new(&a.diffusion.display().to_string()),
+            steps: a.steps,
+            eta: 1.0,
+            start,
+            start_step: a.start_step,
+        });
+        diffusion.validate("--diffusion")?;
+        fills.push(NamedFill { name, inpainter: diffusion.build()? });
+    }
     writeln!(out, "{} views ({} frames apart) from {}", views.len(), a.gap, a.sequences.display()).map_err(w)?;
     let bar = crate::export::rows::progress_bar(views.len() as u64, !a.quiet, "views");
     let range = (working.depth_range[0], working.depth_range[1]);

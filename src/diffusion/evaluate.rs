@@ -157,13 +157,13 @@ pub fn evaluate(views: &[View], corrections: &[NamedCorrector], fills: &[NamedFi
 /// The rows as an aligned table.
 pub fn format_table(rows: &[MethodRow]) -> String {
     let mut s = format!(
-        "{:<12} {:<10} {:>6} {:>9} {:>11} {:>10} {:>9} {:>9} {:>8} {:>9}\n",
+        "{:<12} {:<14} {:>6} {:>9} {:>11} {:>10} {:>9} {:>9} {:>8} {:>9}\n",
         "correction", "fill", "views", "kept/map", "wrong/map", "kept AbsR", "coverage", "AbsRel", "RMSE m", "d<1.25"
     );
     for r in rows {
         let c = &r.scores;
         s += &format!(
-            "{:<12} {:<10} {:>6} {:>9.0} {:>11.1} {:>10.4} {:>8.1}% {:>9.4} {:>8.4} {:>8.1}%\n",
+            "{:<12} {:<14} {:>6} {:>9.0} {:>11.1} {:>10.4} {:>8.1}% {:>9.4} {:>8.4} {:>8.1}%\n",
             r.correction,
             r.fill,
             c.views,

@@ -6,9 +6,11 @@
 pub mod checkpoint;
 pub mod data;
 pub mod evaluate;
+pub mod model;
 pub mod sampler;
 pub mod schedule;
 pub mod train;
 
+pub use model::{load_model, X0Model};
 pub use sampler::{ddnm_sample, Problem, SamplerOptions};
 pub use schedule::Schedule;

@@ -6,9 +6,14 @@
 //! so every known pixel equals y bit for bit. All noise (the start image and every z) comes from each
 //! problem's own seeded [`Rng`], so a problem's output does not depend on the other problems of its batch
 //! or on libtorch's generator.
+//!
+//! Optionally (not the official sampler) the chain starts at an intermediate step `s` from a noised
+//! initial estimate, `x_s = √ᾱ_s·x_init + √(1 − ᾱ_s)·z` (SDEdit-style), where `x_init` is the known pixels
+//! and a classical fill elsewhere: the coarse depth then comes from the known neighbourhood and the
+//! model adds what it learned at the finer noise levels.
 
 use super::schedule::Schedule;
-use crate::nn::denoiser::Denoiser;
+use super::model::X0Model;
 use crate::rng::Rng;
 use serde::{Deserialize, Serialize};
 use tch::{Device, Kind, Tensor};
@@ -21,11 +26,14 @@ pub struct SamplerOptions {
     pub steps: usize,
     /// DDIM η (official 1.0: fully stochastic).
     pub eta: f64,
+    /// Start at this step from each problem's noised `init` instead of pure noise at T − 1 (None:
+    /// official).
+    pub start_step: Option<usize>,
 }
 
 impl SamplerOptions {
-    /// The official sampler: 250 steps, η = 1.
-    pub const OFFICIAL: SamplerOptions = SamplerOptions { steps: 250, eta: 1.0 };
+    /// The official sampler: 250 steps, η = 1, from pure noise.
+    pub const OFFICIAL: SamplerOptions = SamplerOptions { steps: 250, eta: 1.0, start_step: None };
 }
 
 /// One inpainting problem at the network's resolution.
@@ -38,12 +46,14 @@ pub struct Problem<'a> {
     pub intrinsics: [f64; 4],
     /// Seed of every random draw of this problem.
     pub seed: u64,
+    /// Initial estimate of the whole map in network space (required with `start_step`).
+    pub init: Option<&'a [f32]>,
 }
 
 /// Samples every problem (all of size `width`×`height`) in one batch and returns x̂0 per problem in
 /// network space. H and W are padded with unknown pixels up to the U-Net's size multiple.
 pub fn ddnm_sample(
-    net: &Denoiser,
+    net: &dyn X0Model,
     schedule: &Schedule,
     opts: &SamplerOptions,
     width: usize,
@@ -54,17 +64,22 @@ pub fn ddnm_sample(
     if problems.is_empty() {
         return Vec::new();
     }
-    let m = net.config.unet.size_multiple() as usize;
+    let m = net.size_multiple();
     let (pw, ph) = (width.div_ceil(m) * m, height.div_ceil(m) * m);
     let (b, n) = (problems.len(), pw * ph);
     let shape = [b as i64, 1, ph as i64, pw as i64];
     let mut y = vec![-1f32; b * n];
+    let mut init = vec![-1f32; b * n];
     let mut known = vec![false; b * n];
     for (i, p) in problems.iter().enumerate() {
         assert!(p.y.len() == width * height && p.known.len() == width * height, "problem size");
+        let start = p.init.unwrap_or(p.y);
+        assert!(start.len() == width * height, "init size");
+        assert!(opts.start_step.is_none() || p.init.is_some(), "a start step needs an initial estimate");
         for r in 0..height {
             let (dst, src) = (i * n + r * pw, r * width);
             y[dst..dst + width].copy_from_slice(&p.y[src..src + width]);
+            init[dst..dst + width].copy_from_slice(&start[src..src + width]);
             known[dst..dst + width].copy_from_slice(&p.known[src..src + width]);
         }
     }
@@ -81,11 +96,23 @@ pub fn ddnm_sample(
         let y = Tensor::from_slice(&y).view(shape).to_device(device);
         let known = Tensor::from_slice(&known).view(shape).to_device(device);
         let k = Tensor::from_slice(&k).view([b as i64, 4]).to_device(device);
-        let mut x = noise(&mut rngs);
+        let pairs = match opts.start_step {
+            None => schedule.ddim_pairs(opts.steps),
+            Some(s) => schedule.ddim_pairs_from(s, opts.steps),
+        };
+        let mut x = match opts.start_step {
+            None => noise(&mut rngs),
+            Some(s) => {
+                let ab = schedule.alpha_bar(pairs[0].0.min(s as i64));
+                let init = Tensor::from_slice(&init).view(shape).to_device(device);
+                let known_init = y.where_self(&known, &init);
+                known_init * ab.sqrt() + noise(&mut rngs) * (1.0 - ab).sqrt()
+            }
+        };
         let mut x0 = y.shallow_clone();
-        for (t, t_next) in schedule.ddim_pairs(opts.steps) {
+        for (t, t_next) in pairs {
             let time = Tensor::full([b as i64], t, (Kind::Int64, device));
-            let pred = net.forward(&x, &time, &k).clamp(-1.0, 1.0);
+            let pred = net.predict_x0(&x, &time, &k).clamp(-1.0, 1.0);
             let ab = schedule.alpha_bar(t);
             let eps = (&x * (1.0 / ab).sqrt() - &pred) / (1.0 / ab - 1.0).sqrt();
             x0 = y.where_self(&known, &pred);

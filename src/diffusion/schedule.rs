@@ -68,8 +68,13 @@ impl Schedule {
     /// reversed (truncation towards zero, as the reference's `.int()`); 250 of 1000 gives
     /// `(999, 995), (995, 991), …, (3, −1)`.
     pub fn ddim_pairs(&self, steps: usize) -> Vec<(i64, i64)> {
-        let t_max = self.len() as f64 - 1.0;
-        let steps = steps.clamp(1, self.len());
+        self.ddim_pairs_from(self.len() - 1, steps)
+    }
+
+    /// DDIM pairs from step `start` (instead of T − 1) down to −1: `int(linspace(−1, start, steps + 1))`.
+    pub fn ddim_pairs_from(&self, start: usize, steps: usize) -> Vec<(i64, i64)> {
+        let t_max = start.min(self.len() - 1) as f64;
+        let steps = steps.clamp(1, t_max as usize + 1);
         let times: Vec<i64> = (0..=steps)
             .rev()
             .map(|k| {
@@ -119,5 +124,6 @@ mod tests {
         // A step count that does not divide T: linspace(−1, 999, 4) = −1, 332.33, 665.67, 999.
         assert_eq!(s.ddim_pairs(3), vec![(999, 665), (665, 332), (332, -1)]);
         assert_eq!(s.ddim_pairs(1), vec![(999, -1)]);
+        assert_eq!(s.ddim_pairs_from(499, 5), vec![(499, 399), (399, 299), (299, 199), (199, 99), (99, -1)]);
     }
 }

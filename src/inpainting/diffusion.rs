@@ -1,11 +1,11 @@
 //! The diffusion inpainter: the trained denoiser sampled with DDIM and the range–null-space step
 //! ([`crate::diffusion::sampler`]), so the known pixels of the output are the input's.
 
-use super::{InpaintContext, Inpainter};
+use super::{InpaintContext, Inpainter, PushPull};
 use crate::diffusion::data::{from_network, to_network};
 use crate::diffusion::sampler::{ddnm_sample, Problem, SamplerOptions};
 use crate::diffusion::schedule::Schedule;
-use crate::diffusion::checkpoint::load_denoiser;
+use crate::diffusion::model::{is_torchscript, load_model, NativeModel, X0Model};
 use crate::error::{Error, Result};
 use crate::geometry::DepthMap;
 use crate::nn::denoiser::Denoiser;
@@ -19,17 +19,40 @@ use tch::{nn, Device};
 #[serde(deny_unknown_fields)]
 pub struct DiffusionInpaintConfig {
     /// Denoiser checkpoint (`pointreggpt train diffusion`, or the authors' weights converted to
-    /// safetensors), relative to the working directory.
+    /// safetensors) or a TorchScript denoiser `forward(x, t, intrinsics) → x0`, relative to the working
+    /// directory.
     pub checkpoint: ModelPath,
     /// DDIM steps (paper 250).
     pub steps: usize,
     /// DDIM η (official 1.0).
     #[serde(default = "official_eta")]
     pub eta: f64,
+    /// Where the chain starts: `noise` (official: pure noise at step 999) or `push_pull` (the known
+    /// pixels and a push–pull fill, noised to `start_step`; see `docs/diffusion.md` for the measurement).
+    #[serde(default)]
+    pub start: Start,
+    /// The step a `push_pull` start is noised to (0..=999).
+    #[serde(default = "default_start_step")]
+    pub start_step: usize,
+}
+
+/// The initial state of the sampling chain.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "snake_case")]
+pub enum Start {
+    /// Pure noise at the last step (official).
+    #[default]
+    Noise,
+    /// The known pixels and a push–pull fill, noised to `start_step`.
+    PushPull,
 }
 
 fn official_eta() -> f64 {
     SamplerOptions::OFFICIAL.eta
+}
+
+fn default_start_step() -> usize {
+    500
 }
 
 impl DiffusionInpaintConfig {
@@ -40,24 +63,27 @@ impl DiffusionInpaintConfig {
         if !(self.eta >= 0.0 && self.eta <= 1.0) {
             return Err(Error::config(field, "eta must be in [0, 1]"));
         }
-        crate::diffusion::checkpoint::read_meta(self.checkpoint.as_path())
-            .map_err(|e| Error::config(field, format!("checkpoint `{}`: {e}", self.checkpoint)))?;
-        Ok(())
+        if self.start_step > 999 {
+            return Err(Error::config(field, "start_step must be in 0..=999"));
+        }
+        let path = self.checkpoint.as_path();
+        let checked = match is_torchscript(path) {
+            Ok(true) => load_model(path, Device::Cpu).map(|_| ()),
+            Ok(false) => crate::diffusion::checkpoint::read_meta(path).map(|_| ()),
+            Err(e) => Err(e),
+        };
+        checked.map_err(|e| Error::config(field, format!("checkpoint `{}`: {e}", self.checkpoint)))
     }
 
     pub fn sampler(&self) -> SamplerOptions {
-        SamplerOptions { steps: self.steps, eta: self.eta }
+        let start_step = (self.start == Start::PushPull).then_some(self.start_step);
+        SamplerOptions { steps: self.steps, eta: self.eta, start_step }
     }
-}
-
-struct Loaded {
-    _vs: nn::VarStore,
-    net: Denoiser,
 }
 
 /// A loaded denoiser as an [`Inpainter`].
 pub struct DiffusionInpainter {
-    loaded: Mutex<Loaded>,
+    model: Mutex<Box<dyn X0Model>>,
     schedule: Schedule,
     sampler: SamplerOptions,
     device: Device,
@@ -65,14 +91,18 @@ pub struct DiffusionInpainter {
 
 impl DiffusionInpainter {
     pub fn load(config: &DiffusionInpaintConfig, device: Device) -> Result<Self> {
-        let (vs, net, _) = load_denoiser(config.checkpoint.as_path(), device)?;
-        Ok(Self::new(vs, net, config.sampler()))
+        Ok(Self::from_model(load_model(config.checkpoint.as_path(), device)?, config.sampler(), device))
     }
 
     /// Wraps a network whose variables live in `vs`.
     pub fn new(vs: nn::VarStore, net: Denoiser, sampler: SamplerOptions) -> Self {
         let device = vs.device();
-        DiffusionInpainter { loaded: Mutex::new(Loaded { _vs: vs, net }), schedule: Schedule::official(), sampler, device }
+        Self::from_model(Box::new(NativeModel::new(vs, net)), sampler, device)
+    }
+
+    /// Wraps any x0 predictor on `device`.
+    pub fn from_model(model: Box<dyn X0Model>, sampler: SamplerOptions, device: Device) -> Self {
+        DiffusionInpainter { model: Mutex::new(model), schedule: Schedule::official(), sampler, device }
     }
 
     /// Inpaints several same-sized views in one batch (one forward pass per step for all of them).
@@ -88,14 +118,29 @@ impl DiffusionInpainter {
             .iter()
             .map(|(d, known, _)| d.data().iter().zip(known.iter()).map(|(z, k)| *k && to_network(*z) > -1.0).collect())
             .collect();
+        // The classical fill a `push_pull` start noises (in network space).
+        let inits: Vec<Vec<f32>> = match self.sampler.start_step {
+            None => Vec::new(),
+            Some(_) => views
+                .iter()
+                .map(|(d, known, ctx)| PushPull.inpaint(d, known, ctx).data().iter().map(|z| to_network(*z)).collect())
+                .collect(),
+        };
         let problems: Vec<Problem<'_>> = views
             .iter()
             .zip(ys.iter().zip(&masks))
-            .map(|((_, _, ctx), (y, m))| Problem { y, known: m, intrinsics: ctx.intrinsics.as_vector(), seed: ctx.seed })
+            .enumerate()
+            .map(|(i, ((_, _, ctx), (y, m)))| Problem {
+                y,
+                known: m,
+                intrinsics: ctx.intrinsics.as_vector(),
+                seed: ctx.seed,
+                init: inits.get(i).map(Vec::as_slice),
+            })
             .collect();
         let out = {
-            let guard = self.loaded.lock().unwrap_or_else(|e| e.into_inner());
-            ddnm_sample(&guard.net, &self.schedule, &self.sampler, w, h, &problems, self.device)
+            let guard = self.model.lock().unwrap_or_else(|e| e.into_inner());
+            ddnm_sample(guard.as_ref(), &self.schedule, &self.sampler, w, h, &problems, self.device)
         };
         views
             .iter()

@@ -6,7 +6,7 @@ pub mod push_pull;
 use crate::geometry::{DepthMap, Intrinsics};
 use serde::{Deserialize, Serialize};
 
-pub use diffusion::{DiffusionInpainter, DiffusionInpaintConfig};
+pub use diffusion::{DiffusionInpaintConfig, DiffusionInpainter, Start};
 pub use push_pull::PushPull;
 
 /// What an inpainter may know about a target view besides its pixels.

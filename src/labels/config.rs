@@ -61,6 +61,11 @@ pub struct WindowConfig {
     pub stride: usize,
     /// The frame whose camera the clouds and the sampled pose are relative to.
     pub reference: Reference,
+    /// Index of the first frame of each sequence that windows use (frames before it are left out, e.g.
+    /// to hold them out for validation).
+    pub first_frame: usize,
+    /// At most this many windows per sequence (0: as many as fit).
+    pub max_windows: usize,
 }
 
 /// Which frame of a window is the reference.
@@ -75,7 +80,7 @@ pub enum Reference {
 
 impl Default for WindowConfig {
     fn default() -> Self {
-        WindowConfig { frames: 50, stride: 50, reference: Reference::First }
+        WindowConfig { frames: 50, stride: 50, reference: Reference::First, first_frame: 0, max_windows: 0 }
     }
 }
 

@@ -22,17 +22,21 @@ pub fn windows(config: &LabelsConfig) -> Result<(Catalog, Vec<Window>)> {
     while start < catalog.frames.len() {
         let scene = catalog.frames[start].scene.clone();
         let end = (start..catalog.frames.len()).find(|&i| catalog.frames[i].scene != scene).unwrap_or(catalog.frames.len());
-        let n = end - start;
-        let (len, stride) = (config.window.frames, config.window.stride);
+        let skip = config.window.first_frame;
+        let n = (end - start).saturating_sub(skip);
+        let (len, stride, max) = (config.window.frames, config.window.stride, config.window.max_windows);
         let mut w = 0;
-        while w * stride + len <= n {
-            let first = start + w * stride;
+        while w * stride + len <= n && (max == 0 || w < max) {
+            let first = start + skip + w * stride;
             let frames: Vec<usize> = (first..first + len).collect();
             let reference = match config.window.reference {
                 Reference::First => frames[0],
                 Reference::Middle => frames[len / 2],
             };
-            out.push(Window { key: format!("{scene}/window-{w:06}"), scene: scene.clone(), frames, reference });
+            // Windows are numbered by their first frame's position in the sequence, so held-out windows
+            // (a later `first_frame`) never share a key with training ones.
+            let number = (skip + w * stride) / stride.max(1);
+            out.push(Window { key: format!("{scene}/window-{number:06}"), scene: scene.clone(), frames, reference });
             w += 1;
         }
         start = end;
