@@ -400,3 +400,18 @@ fn a_torchscript_denoiser_samples_like_the_native_one() {
     let err = DiffusionInpaintConfig { checkpoint: ModelPath::new(path.to_str().unwrap()), steps: 3, eta: 1.0, start: Start::Noise, start_step: 500 }.validate("inpaint").unwrap_err();
     assert!(err.to_string().contains("denoiser.pt"), "{err}");
 }
+
+#[test]
+fn the_shipped_pipelines_validate_and_the_paper_one_names_its_missing_models() {
+    // Relative model paths resolve against the working directory: the repository root, as in the README.
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    std::env::set_current_dir(root).unwrap();
+    for name in ["demo.toml", "demo-networks.toml", "paper-3dmatch-classical.toml"] {
+        let text = std::fs::read_to_string(root.join("pipelines").join(name)).unwrap();
+        let c = BuildConfig::from_toml(&text, name).unwrap_or_else(|e| panic!("{name}: {e}"));
+        c.validate().unwrap_or_else(|e| panic!("{name}: {e}"));
+    }
+    let text = std::fs::read_to_string(root.join("pipelines/paper-3dmatch.toml")).unwrap();
+    let err = BuildConfig::from_toml(&text, "paper-3dmatch.toml").and_then(|c| c.validate()).unwrap_err().to_string();
+    assert!(err.contains("models/correction-paper.safetensors") || err.contains("models/diffusion-paper.safetensors"), "{err}");
+}
