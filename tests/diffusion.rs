@@ -167,6 +167,10 @@ fn training_lowers_the_loss_and_resume_equals_an_uninterrupted_run() {
     resumed.resume = true;
     let report = train_diffusion(&data, &resumed, |_| {}).unwrap();
     assert_eq!(report.first_step, 3);
+    // Sample previews at every checkpoint: 4 samples of the 32x32 crop side by side.
+    let png = std::fs::read(a.path().join("preview-0000004.png")).unwrap();
+    assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n");
+    assert_eq!(u32::from_be_bytes(png[16..20].try_into().unwrap()), 4 * 34 - 2, "IHDR width");
     let ta = Tensor::read_safetensors(a.path().join(LATEST)).unwrap();
     let tb: BTreeMap<String, Tensor> = Tensor::read_safetensors(b.path().join(LATEST)).unwrap().into_iter().collect();
     assert!(ta.len() > 100 && ta.len() == tb.len());

@@ -27,7 +27,7 @@ pub enum TrainWhat {
     after_help = "Objective: x0 prediction from x_t = sqrt(abar_t) x0 + sqrt(1 - abar_t) eps (sigmoid schedule -3..3, T 1000), L1 \
 weighted by SNR_t (official) or min(SNR_t, 5). Adam (betas 0.9/0.99) written out so its moments are checkpointed, gradient norm \
 clipped at 1, EMA 0.995 every 10 steps after 100. Every --checkpoint-every steps: <out>/latest.safetensors (model, EMA, Adam; \
-resume with --resume) and a line in <out>/loss.jsonl; sampling uses the EMA weights. Defaults per preset: paper = official \
+resume with --resume), a line in <out>/loss.jsonl and 4 sample previews <out>/preview-<step>.png; sampling uses the EMA weights. Defaults per preset: paper = official \
 (lr 8e-5, batch 32 x 2 accumulation, whole 256x256 frames, 2M steps); tiny = lr 1e-3, batch 8, 64x64 crops (intrinsics \
 shifted), min-SNR, 3000 steps."
 )]
@@ -60,9 +60,12 @@ pub struct TrainDiffusionArgs {
     /// No horizontal flips.
     #[arg(long)]
     pub no_flip: bool,
-    /// Steps between checkpoints (and loss-log lines).
+    /// Steps between checkpoints (and loss-log lines and sample previews).
     #[arg(long)]
     pub checkpoint_every: Option<u64>,
+    /// No <out>/preview-<step>.png (4 unconditional samples of the EMA network, 20 DDIM steps) at checkpoints.
+    #[arg(long)]
+    pub no_previews: bool,
     /// Seed of the initialisation, batches, time steps and noise.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -268,6 +271,7 @@ fn run_diffusion(a: &TrainDiffusionArgs, out: &mut dyn Write) -> Result<()> {
     opts.weighting = a.weighting.unwrap_or(opts.weighting);
     opts.hflip = !a.no_flip;
     opts.checkpoint_every = a.checkpoint_every.unwrap_or(opts.checkpoint_every);
+    opts.previews = !a.no_previews;
     opts.seed = a.seed;
     opts.resume = a.resume;
     opts.device = crate::nn::parse_device(&a.device)?;

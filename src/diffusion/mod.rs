@@ -7,6 +7,7 @@ pub mod checkpoint;
 pub mod data;
 pub mod evaluate;
 pub mod model;
+pub mod preview;
 pub mod sampler;
 pub mod schedule;
 pub mod train;

@@ -58,6 +58,8 @@ pub struct DiffusionTrainOptions {
     pub hflip: bool,
     pub seed: u64,
     pub checkpoint_every: u64,
+    /// Write `preview-<step>.png` (unconditional samples of the EMA network) at every checkpoint.
+    pub previews: bool,
     pub out: PathBuf,
     pub resume: bool,
     #[serde(skip)]
@@ -86,6 +88,7 @@ impl DiffusionTrainOptions {
             hflip: true,
             seed: 0,
             checkpoint_every: if tiny { 250 } else { 1000 },
+            previews: true,
             out,
             resume: false,
             device: Device::Cpu,
@@ -185,6 +188,14 @@ pub fn ema_update(ema: &[(String, Tensor)], online: &[(String, Tensor)], step: u
     })
 }
 
+/// Size and intrinsics of preview samples: the training crop (centred in the first frame) or the frame.
+fn preview_view(data: &FrameSet, opts: &DiffusionTrainOptions) -> (usize, [f64; 4]) {
+    let size = opts.crop.unwrap_or(data.width.min(data.height));
+    let [fx, fy, cx, cy] = data.frames[0].intrinsics;
+    let (left, top) = ((data.width - size) / 2, (data.height - size) / 2);
+    (size, [fx, fy, cx - left as f64, cy - top as f64])
+}
+
 /// One batch: clean frames `[B, 1, S, S]` and intrinsics `[B, 4]`.
 fn make_batch(data: &FrameSet, opts: &DiffusionTrainOptions, rng: &mut Rng) -> (Tensor, Tensor) {
     let (w, h) = (data.width, data.height);
@@ -265,7 +276,7 @@ pub fn train_diffusion(data: &FrameSet, opts: &DiffusionTrainOptions, mut on_rep
     let vs = nn::VarStore::new(opts.device);
     let net = Denoiser::new(&vs.root(), &config)?;
     let ema_vs = nn::VarStore::new(opts.device);
-    let _ema_net = Denoiser::new(&ema_vs.root(), &config)?;
+    let ema_net = Denoiser::new(&ema_vs.root(), &config)?;
     let (online, ema) = (sorted_variables(&vs), sorted_variables(&ema_vs));
     tch::no_grad(|| {
         for ((_, e), (_, o)) in ema.iter().zip(&online) {
@@ -327,6 +338,11 @@ pub fn train_diffusion(data: &FrameSet, opts: &DiffusionTrainOptions, mut on_rep
             use std::io::Write;
             writeln!(log, "{}", serde_json::to_string(&report).expect("json")).map_err(|e| Error::io(&log_path, e))?;
             save(step, report.loss, &adam)?;
+            if opts.previews {
+                let (size, k) = preview_view(data, opts);
+                let path = opts.out.join(format!("preview-{step:07}.png"));
+                tch::no_grad(|| super::preview::write_preview(&ema_net, &schedule, size, k, opts.seed, &path, opts.device))?;
+            }
             on_report(&report);
             (sum, count) = (0.0, 0);
         }
