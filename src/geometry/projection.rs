@@ -40,60 +40,66 @@ pub fn project_zbuffer(
     // how the points were split.
     let threads = rayon::current_num_threads().max(1);
     let chunk = points.len().div_ceil(threads).max(16_384);
-    let buffers: Vec<Vec<u64>> = points
+    // Pixel and camera depth of point `p`, when it lands in the image.
+    let land = |p: &Point| -> Option<(usize, f32)> {
+        let (x, y, z) = (p.x as f64, p.y as f64, p.z as f64);
+        let zc = m[(2, 0)] * x + m[(2, 1)] * y + m[(2, 2)] * z + m[(2, 3)];
+        let zf = zc as f32;
+        if !(zf > 0.0 && zf.is_finite()) {
+            return None;
+        }
+        let xc = m[(0, 0)] * x + m[(0, 1)] * y + m[(0, 2)] * z + m[(0, 3)];
+        let yc = m[(1, 0)] * x + m[(1, 1)] * y + m[(1, 2)] * z + m[(1, 3)];
+        let u = (xc * k.fx / zc + k.cx).round_ties_even();
+        let v = (yc * k.fy / zc + k.cy).round_ties_even();
+        (u >= 0.0 && v >= 0.0 && u < w as f64 && v < h as f64).then(|| (v as usize * w + u as usize, zf))
+    };
+    // Each thread takes a contiguous run of points and keeps its own per-pixel minimum of z's bits
+    // (positive finite f32 compare like their bit patterns); the buffers are merged by minimum, which
+    // does not depend on how the points were split. Equal depths are the same depth, so only the source
+    // index needs a tie rule: the lowest index among the points at the pixel's minimum, found in a second
+    // pass when asked for.
+    let buffers: Vec<Vec<u32>> = points
         .par_chunks(chunk)
-        .enumerate()
-        .map(|(c, pts)| {
-            let mut best = vec![u64::MAX; w * h];
-            let base = (c * chunk) as u64;
-            for (j, p) in pts.iter().enumerate() {
-                let (x, y, z) = (p.x as f64, p.y as f64, p.z as f64);
-                let zc = m[(2, 0)] * x + m[(2, 1)] * y + m[(2, 2)] * z + m[(2, 3)];
-                let zf = zc as f32;
-                if !(zf > 0.0 && zf.is_finite()) {
-                    continue;
-                }
-                let xc = m[(0, 0)] * x + m[(0, 1)] * y + m[(0, 2)] * z + m[(0, 3)];
-                let yc = m[(1, 0)] * x + m[(1, 1)] * y + m[(1, 2)] * z + m[(1, 3)];
-                let u = (xc * k.fx / zc + k.cx).round_ties_even();
-                let v = (yc * k.fy / zc + k.cy).round_ties_even();
-                if u >= 0.0 && v >= 0.0 && u < w as f64 && v < h as f64 {
-                    let key = ((zf.to_bits() as u64) << 32) | (base + j as u64);
-                    let b = &mut best[v as usize * w + u as usize];
-                    if key < *b {
-                        *b = key;
-                    }
+        .map(|pts| {
+            let mut best = vec![u32::MAX; w * h];
+            for p in pts {
+                if let Some((i, z)) = land(p) {
+                    let b = &mut best[i];
+                    *b = (*b).min(z.to_bits());
                 }
             }
             best
         })
         .collect();
-    let mut iter = buffers.into_iter();
-    let mut best = iter.next().unwrap_or_else(|| vec![u64::MAX; w * h]);
-    for other in iter {
-        best.par_chunks_mut(8192).zip(other.par_chunks(8192)).for_each(|(a, b)| {
-            for (x, y) in a.iter_mut().zip(b) {
-                *x = (*x).min(*y);
-            }
-        });
-    }
-
     let mut depth = vec![0.0f32; w * h];
     let mut known = vec![false; w * h];
-    let mut source = if with_source_index { vec![NO_SOURCE; w * h] } else { Vec::new() };
-    for (i, &b) in best.iter().enumerate() {
-        if b != u64::MAX {
-            depth[i] = f32::from_bits((b >> 32) as u32);
-            known[i] = true;
-            if with_source_index {
-                source[i] = (b & 0xFFFF_FFFF) as u32;
+    let rows = 64 * w;
+    depth.par_chunks_mut(rows).zip(known.par_chunks_mut(rows)).enumerate().for_each(|(c, (d, kn))| {
+        let off = c * rows;
+        for j in 0..d.len() {
+            let b = buffers.iter().map(|buf| buf[off + j]).min().unwrap_or(u32::MAX);
+            if b != u32::MAX {
+                d[j] = f32::from_bits(b);
+                kn[j] = true;
             }
         }
-    }
+    });
+    let source = with_source_index.then(|| {
+        let mut source = vec![NO_SOURCE; w * h];
+        for (j, p) in points.iter().enumerate() {
+            if let Some((i, z)) = land(p) {
+                if z == depth[i] && source[i] == NO_SOURCE {
+                    source[i] = j as u32;
+                }
+            }
+        }
+        source
+    });
     Projection {
         depth: DepthMap::from_checked_parts(k.width, k.height, depth),
         known,
-        source_index: with_source_index.then_some(source),
+        source_index: source,
     }
 }
 
