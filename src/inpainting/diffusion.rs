@@ -113,7 +113,8 @@ impl DiffusionInpainter {
             .iter()
             .map(|(d, known, _)| d.data().iter().zip(known.iter()).map(|(z, k)| if *k { to_network(*z) } else { -1.0 }).collect())
             .collect();
-        // A known pixel without a usable depth (none, or beyond 10 m) is left for the model to fill.
+        // A known pixel without a usable depth (none, or beyond 10 m) is not imposed during sampling; the
+        // output still copies it from the input, as every inpainter does with known pixels.
         let masks: Vec<Vec<bool>> = views
             .iter()
             .map(|(d, known, _)| d.data().iter().zip(known.iter()).map(|(z, k)| *k && to_network(*z) > -1.0).collect())
