@@ -16,6 +16,10 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::Instant;
 
+#[path = "common/mod.rs"]
+mod common;
+use common::{cpu_model, load_average, write_npy};
+
 const SEQUENCE: &str = "7scenes-redkitchen";
 const FRAME: u32 = 0;
 const OTHER_FRAME: u32 = 20;
@@ -214,21 +218,6 @@ impl Peers {
     }
 }
 
-/// Writes a little-endian `.npy` (format 1.0): magic, header dict padded to 64 bytes, raw data.
-fn write_npy(path: &Path, descr: &str, shape: &[usize], data: &[u8]) {
-    let dims: Vec<String> = shape.iter().map(|d| d.to_string()).collect();
-    let shape = if dims.len() == 1 { format!("({},)", dims[0]) } else { format!("({})", dims.join(", ")) };
-    let mut header = format!("{{'descr': '{descr}', 'fortran_order': False, 'shape': {shape}, }}");
-    while (10 + header.len() + 1) % 64 != 0 {
-        header.push(' ');
-    }
-    header.push('\n');
-    let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
-    bytes.extend((header.len() as u16).to_le_bytes());
-    bytes.extend(header.as_bytes());
-    bytes.extend(data);
-    std::fs::write(path, bytes).unwrap_or_else(|e| fail(&format!("writing {}: {e}", path.display())));
-}
 
 fn f32_bytes(v: impl IntoIterator<Item = f32>) -> Vec<u8> {
     v.into_iter().flat_map(f32::to_le_bytes).collect()
@@ -295,24 +284,7 @@ fn parse_peers(stdout: &str) -> Peers {
 // ------------------------------------------------------------------------------------------------
 // Report
 
-fn cpu_model() -> String {
-    std::fs::read_to_string("/proc/cpuinfo")
-        .ok()
-        .and_then(|s| {
-            s.lines()
-                .find(|l| l.starts_with("model name"))
-                .map(|l| l.split(':').nth(1).unwrap_or("").trim().to_string())
-        })
-        .unwrap_or_else(|| "unknown".into())
-}
 
-/// The 1-minute load average: well above 0 means other processes competed for the cores.
-fn load_average() -> String {
-    std::fs::read_to_string("/proc/loadavg")
-        .ok()
-        .and_then(|s| s.split_whitespace().next().map(str::to_string))
-        .unwrap_or_else(|| "unknown".into())
-}
 
 fn print_header(x: &Inputs, peers: &Peers, load: &str) {
     let cores = std::thread::available_parallelism().map(|n| n.get()).unwrap_or(0);

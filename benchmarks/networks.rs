@@ -30,6 +30,10 @@ use std::process::{Child, ChildStdin, ChildStdout, Command, Stdio};
 use std::time::Instant;
 use tch::{nn, Device, Kind, Tensor};
 
+#[path = "common/mod.rs"]
+mod common;
+use common::{cpu_model, load_average};
+
 /// libtorch intra-op threads of both sides (the machine has 2 cores).
 const THREADS: i32 = 2;
 const SIZE: i64 = 256;
@@ -523,23 +527,7 @@ fn run_tiny() -> TinyRun {
 // ------------------------------------------------------------------------------------------------
 // Report
 
-fn cpu_model() -> String {
-    std::fs::read_to_string("/proc/cpuinfo")
-        .ok()
-        .and_then(|s| {
-            s.lines()
-                .find(|l| l.starts_with("model name"))
-                .map(|l| l.split(':').nth(1).unwrap_or("").trim().to_string())
-        })
-        .unwrap_or_else(|| "unknown".into())
-}
 
-fn load_average() -> String {
-    std::fs::read_to_string("/proc/loadavg")
-        .ok()
-        .and_then(|s| s.split_whitespace().next().map(str::to_string))
-        .unwrap_or_else(|| "unknown".into())
-}
 
 fn libtorch_version() -> String {
     match std::env::var("LIBTORCH") {

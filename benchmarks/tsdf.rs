@@ -18,6 +18,10 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::Instant;
 
+#[path = "common/mod.rs"]
+mod common;
+use common::{write_npy};
+
 const SEQUENCE: &str = "7scenes-redkitchen";
 const FRAMES: usize = 50;
 const SYNTH_SEED: u64 = 41;
@@ -249,21 +253,6 @@ fn accuracy(points: &[Point], seq: &SyntheticSequence) -> [f64; 3] {
 // ------------------------------------------------------------------------------------------------
 // Peers: .npy hand-off
 
-/// Writes a little-endian `.npy` (format 1.0).
-fn write_npy(path: &Path, descr: &str, shape: &[usize], data: &[u8]) {
-    let dims: Vec<String> = shape.iter().map(|d| d.to_string()).collect();
-    let shape = if dims.len() == 1 { format!("({},)", dims[0]) } else { format!("({})", dims.join(", ")) };
-    let mut header = format!("{{'descr': '{descr}', 'fortran_order': False, 'shape': {shape}, }}");
-    while (10 + header.len() + 1) % 64 != 0 {
-        header.push(' ');
-    }
-    header.push('\n');
-    let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
-    bytes.extend((header.len() as u16).to_le_bytes());
-    bytes.extend(header.as_bytes());
-    bytes.extend(data);
-    std::fs::write(path, bytes).unwrap_or_else(|e| fail(&format!("writing {}: {e}", path.display())));
-}
 
 /// Reads a little-endian float32 `(n, 3)` `.npy` (format 1.x–3.x) as points.
 fn read_points_npy(path: &Path) -> Result<Vec<Point>, String> {

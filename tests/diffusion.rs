@@ -4,7 +4,7 @@
 
 mod support;
 
-use pointreggpt::diffusion::checkpoint::{export_ema, load_denoiser, sorted_variables, EMA};
+use pointreggpt::diffusion::checkpoint::{export_ema, load_denoiser, save, sorted_variables, DiffusionMeta, EMA, FORMAT};
 use pointreggpt::diffusion::data::{to_network, FrameSet, TrainFrame};
 use pointreggpt::diffusion::train::{batch_loss, train_diffusion, DiffusionTrainOptions, Weighting, LATEST};
 use pointreggpt::diffusion::{ddnm_sample, Problem, SamplerOptions, Schedule};
@@ -27,6 +27,15 @@ fn tiny(seed: i64) -> (nn::VarStore, Denoiser) {
     let vs = nn::VarStore::new(Device::Cpu);
     let net = Denoiser::new(&vs.root(), &DenoiserConfig::from_preset(Preset::Tiny)).unwrap();
     (vs, net)
+}
+
+/// An untrained tiny denoiser saved as a checkpoint in `dir` (EMA weights, our metadata).
+fn save_untrained(dir: &Path, seed: i64) -> std::path::PathBuf {
+    let (vs, _net) = tiny(seed);
+    let path = dir.join("denoiser.safetensors");
+    let meta = DiffusionMeta { format: FORMAT.into(), net: DenoiserConfig::from_preset(Preset::Tiny), step: 0, info: serde_json::Value::Null };
+    save(&path, &meta, &[], &sorted_variables(&vs), &[]).unwrap();
+    path
 }
 
 /// A random inpainting problem of `w`×`h`: smooth depth in network space, `known_rate` of it known.
@@ -241,15 +250,7 @@ fn the_authors_key_layout_loads_without_metadata() {
 fn a_build_with_the_diffusion_fill_keeps_the_condition_and_is_deterministic_across_threads() {
     // An untrained tiny denoiser: the test is about wiring, exactness and determinism, not realism.
     let dir = tempfile::tempdir().unwrap();
-    let (vs, _net) = tiny(7);
-    let ckpt = dir.path().join("denoiser.safetensors");
-    let meta = pointreggpt::diffusion::checkpoint::DiffusionMeta {
-        format: pointreggpt::diffusion::checkpoint::FORMAT.into(),
-        net: DenoiserConfig::from_preset(Preset::Tiny),
-        step: 0,
-        info: serde_json::Value::Null,
-    };
-    pointreggpt::diffusion::checkpoint::save(&ckpt, &meta, &[], &sorted_variables(&vs), &[]).unwrap();
+    let ckpt = save_untrained(dir.path(), 7);
     let cfg = dir.path().join("build.toml");
     std::fs::write(
         &cfg,
@@ -299,15 +300,7 @@ fn a_build_with_the_diffusion_fill_keeps_the_condition_and_is_deterministic_acro
 fn eval_inpaint_on_real_frames_scores_every_method() {
     let Some(real) = support::real_data() else { return };
     let dir = tempfile::tempdir().unwrap();
-    let (vs, _net) = tiny(8);
-    let ckpt = dir.path().join("denoiser.safetensors");
-    let meta = pointreggpt::diffusion::checkpoint::DiffusionMeta {
-        format: pointreggpt::diffusion::checkpoint::FORMAT.into(),
-        net: DenoiserConfig::from_preset(Preset::Tiny),
-        step: 0,
-        info: serde_json::Value::Null,
-    };
-    pointreggpt::diffusion::checkpoint::save(&ckpt, &meta, &[], &sorted_variables(&vs), &[]).unwrap();
+    let ckpt = save_untrained(dir.path(), 8);
     let csv = dir.path().join("eval.csv");
     let o = support::bin()
         .current_dir(env!("CARGO_MANIFEST_DIR"))

@@ -113,10 +113,7 @@ pub fn run(args: &EvalArgs, out: &mut dyn Write) -> Result<()> {
 
 fn run_correction(a: &EvalCorrectionArgs, out: &mut dyn Write) -> Result<()> {
     let w = |e: std::io::Error| Error::io("<stdout>", e);
-    if a.torch_threads < 1 {
-        return Err(Error::config("--torch-threads", "must be at least 1"));
-    }
-    tch::set_num_threads(a.torch_threads);
+    crate::nn::set_torch_threads(a.torch_threads)?;
     let device = crate::nn::parse_device(&a.device)?;
     let set = LabelSet::open_all(&a.labels)?;
     let mut checkpoints = Vec::new();
@@ -136,13 +133,7 @@ fn run_correction(a: &EvalCorrectionArgs, out: &mut dyn Write) -> Result<()> {
         100.0 * drop as f64 / px.max(1) as f64
     )
     .map_err(w)?;
-    write!(out, "{}", format_table(&rows)).map_err(w)?;
-    if let Some(dir) = a.out.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
-    }
-    std::fs::write(&a.out, to_csv(&rows)).map_err(|e| Error::io(&a.out, e))?;
-    writeln!(out, "wrote {}", a.out.display()).map_err(w)?;
-    Ok(())
+    report(out, &format_table(&rows), &to_csv(&rows), &a.out)
 }
 
 fn run_inpaint(a: &EvalInpaintArgs, out: &mut dyn Write) -> Result<()> {
@@ -152,10 +143,10 @@ fn run_inpaint(a: &EvalInpaintArgs, out: &mut dyn Write) -> Result<()> {
     use crate::nn::ModelPath;
     use crate::pipeline::config::WorkingConfig;
     let w = |e: std::io::Error| Error::io("<stdout>", e);
-    if a.torch_threads < 1 || a.gap == 0 || a.every == 0 {
-        return Err(Error::config("--gap/--every/--torch-threads", "must be at least 1"));
+    if a.gap == 0 || a.every == 0 {
+        return Err(Error::config("--gap/--every", "must be at least 1"));
     }
-    tch::set_num_threads(a.torch_threads);
+    crate::nn::set_torch_threads(a.torch_threads)?;
     let working = WorkingConfig::default();
     let mut views = Vec::new();
     for seq in crate::sources::open_sequences(&a.sequences, crate::sources::Layout::Auto)? {
@@ -200,11 +191,16 @@ fn run_inpaint(a: &EvalInpaintArgs, out: &mut dyn Write) -> Result<()> {
     let range = (working.depth_range[0], working.depth_range[1]);
     let rows = evaluate(&views, &corrections, &fills, range, || bar.inc(1));
     bar.finish_and_clear();
-    write!(out, "{}", format_table(&rows)).map_err(w)?;
-    if let Some(dir) = a.out.parent().filter(|d| !d.as_os_str().is_empty()) {
+    report(out, &format_table(&rows), &to_csv(&rows), &a.out)
+}
+
+/// Prints the table and writes the CSV to `csv_path` (creating its folder).
+fn report(out: &mut dyn Write, table: &str, csv: &str, csv_path: &std::path::Path) -> Result<()> {
+    let w = |e: std::io::Error| Error::io("<stdout>", e);
+    write!(out, "{table}").map_err(w)?;
+    if let Some(dir) = csv_path.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     }
-    std::fs::write(&a.out, to_csv(&rows)).map_err(|e| Error::io(&a.out, e))?;
-    writeln!(out, "wrote {}", a.out.display()).map_err(w)?;
-    Ok(())
+    std::fs::write(csv_path, csv).map_err(|e| Error::io(csv_path, e))?;
+    writeln!(out, "wrote {}", csv_path.display()).map_err(w)
 }

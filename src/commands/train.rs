@@ -162,10 +162,7 @@ pub fn run(args: &TrainArgs, out: &mut dyn Write) -> Result<()> {
 
 fn run_correction(a: &TrainCorrectionArgs, out: &mut dyn Write) -> Result<()> {
     let w = |e: std::io::Error| Error::io("<stdout>", e);
-    if a.torch_threads < 1 {
-        return Err(Error::config("--torch-threads", "must be at least 1"));
-    }
-    tch::set_num_threads(a.torch_threads);
+    crate::nn::set_torch_threads(a.torch_threads)?;
     let mut opts = TrainOptions::for_preset(a.preset, a.out.clone());
     opts.augment = !a.no_augment;
     opts.epochs = a.epochs.unwrap_or(opts.epochs);
@@ -256,10 +253,7 @@ fn run_diffusion(a: &TrainDiffusionArgs, out: &mut dyn Write) -> Result<()> {
     use crate::diffusion::data::FrameSet;
     use crate::diffusion::train::{train_diffusion, DiffusionTrainOptions, LATEST, LOSS_LOG};
     let w = |e: std::io::Error| Error::io("<stdout>", e);
-    if a.torch_threads < 1 {
-        return Err(Error::config("--torch-threads", "must be at least 1"));
-    }
-    tch::set_num_threads(a.torch_threads);
+    crate::nn::set_torch_threads(a.torch_threads)?;
     let mut opts = DiffusionTrainOptions::for_preset(a.preset, a.out.clone());
     opts.steps = a.steps.unwrap_or(opts.steps);
     opts.batch = a.batch.unwrap_or(opts.batch);

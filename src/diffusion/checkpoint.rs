@@ -65,6 +65,11 @@ pub fn save(path: &Path, meta: &DiffusionMeta, online: &[(String, Tensor)], ema:
 /// Reads the metadata, or infers the configuration of a file without ours (the authors' layout).
 pub fn read_meta(path: &Path) -> Result<DiffusionMeta> {
     let (meta, shapes) = read_header(path)?;
+    meta_from_header(path, &meta, &shapes)
+}
+
+/// [`read_meta`] from an already read header.
+fn meta_from_header(path: &Path, meta: &BTreeMap<String, String>, shapes: &BTreeMap<String, Vec<i64>>) -> Result<DiffusionMeta> {
     match meta.get(META_KEY) {
         Some(json) => {
             let m: DiffusionMeta =
@@ -75,8 +80,8 @@ pub fn read_meta(path: &Path) -> Result<DiffusionMeta> {
             Ok(m)
         }
         None => {
-            let prefix = network_prefix(path, &shapes)?;
-            Ok(DiffusionMeta { format: FORMAT.into(), net: infer_config(path, &shapes, prefix)?, step: 0, info: serde_json::Value::Null })
+            let prefix = network_prefix(path, shapes)?;
+            Ok(DiffusionMeta { format: FORMAT.into(), net: infer_config(path, shapes, prefix)?, step: 0, info: serde_json::Value::Null })
         }
     }
 }
@@ -121,10 +126,15 @@ fn infer_config(path: &Path, shapes: &BTreeMap<String, Vec<i64>>, prefix: &str) 
     Ok(DenoiserConfig { preset, unet, intrinsics_scale: 1.0 })
 }
 
-/// The file's tensors under `prefix` (prefix stripped).
-pub fn read_group(path: &Path, prefix: &str) -> Result<HashMap<String, Tensor>> {
+/// Every tensor of the file, by name.
+pub fn read_tensors(path: &Path) -> Result<HashMap<String, Tensor>> {
     let all = Tensor::read_safetensors(path).map_err(|e| Error::Torch(format!("{}: {e}", path.display())))?;
-    Ok(all.into_iter().filter_map(|(k, t)| k.strip_prefix(prefix).map(|s| (s.to_string(), t))).collect())
+    Ok(all.into_iter().collect())
+}
+
+/// The tensors under `prefix` (prefix stripped).
+pub fn group(tensors: &HashMap<String, Tensor>, prefix: &str) -> HashMap<String, Tensor> {
+    tensors.iter().filter_map(|(k, t)| k.strip_prefix(prefix).map(|s| (s.to_string(), t.shallow_clone()))).collect()
 }
 
 /// Copies `group` into `vars` (every variable must be there with its shape; tensors the network does not
@@ -144,12 +154,12 @@ pub fn copy_into(path: &Path, group: &HashMap<String, Tensor>, vars: &[(String, 
 
 /// Loads the network sampling uses (EMA weights when present) onto `device`.
 pub fn load_denoiser(path: &Path, device: Device) -> Result<(nn::VarStore, Denoiser, DiffusionMeta)> {
-    let meta = read_meta(path)?;
-    let (_, shapes) = read_header(path)?;
+    let (header, shapes) = read_header(path)?;
+    let meta = meta_from_header(path, &header, &shapes)?;
     let prefix = network_prefix(path, &shapes)?;
     let mut vs = nn::VarStore::new(Device::Cpu);
     let net = Denoiser::new(&vs.root(), &meta.net)?;
-    copy_into(path, &read_group(path, prefix)?, &sorted_variables(&vs), "denoiser")?;
+    copy_into(path, &group(&read_tensors(path)?, prefix), &sorted_variables(&vs), "denoiser")?;
     if device != Device::Cpu {
         vs.set_device(device);
     }
@@ -160,7 +170,7 @@ pub fn load_denoiser(path: &Path, device: Device) -> Result<(nn::VarStore, Denoi
 /// sampling needs.
 pub fn export_ema(src: &Path, dst: &Path) -> Result<()> {
     let meta = read_meta(src)?;
-    let mut ema: Named = read_group(src, EMA)?.into_iter().collect();
+    let mut ema: Named = group(&read_tensors(src)?, EMA).into_iter().collect();
     if ema.is_empty() {
         return Err(Error::input(src, "no EMA weights (`ema.ema_model.model.*`) to export"));
     }

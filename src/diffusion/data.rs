@@ -2,10 +2,9 @@
 //! working resolution exactly as the build's ingest does, in network space.
 
 use crate::error::{Error, Result};
-use crate::geometry::ResizeCrop;
 use crate::nn::correction::normalise_depth;
 use crate::pipeline::catalog::Catalog;
-use crate::pipeline::config::{BuildConfig, IntrinsicsMap};
+use crate::pipeline::config::BuildConfig;
 use std::path::{Path, PathBuf};
 
 /// Network value of a metric depth: `2·z/10 − 1`, with missing, non-finite and > 10 m as −1.
@@ -70,13 +69,7 @@ impl FrameSet {
             let bar = crate::export::rows::progress_bar(catalog.frames.len() as u64, progress, "frames");
             for i in 0..catalog.frames.len() {
                 let frame = catalog.load(i)?;
-                let k0 = &frame.intrinsics;
-                let rc = ResizeCrop::official(k0.width, k0.height, config.working.size)?;
-                let k = match config.working.intrinsics {
-                    IntrinsicsMap::Official => rc.official_intrinsics(k0)?,
-                    IntrinsicsMap::Exact => rc.exact_intrinsics(k0)?,
-                };
-                let depth = frame.depth.resize_crop(&rc)?;
+                let (depth, k) = config.working.map_frame(&frame)?;
                 set.frames.push(TrainFrame {
                     depth: depth.data().iter().map(|z| to_network(*z)).collect(),
                     intrinsics: k.as_vector(),

@@ -9,7 +9,7 @@
 
 use crate::correction::{apply_keep_mask, Corrector};
 use crate::error::{Error, Result};
-use crate::geometry::{backproject, project_zbuffer, DepthMap, Intrinsics, ResizeCrop};
+use crate::geometry::{backproject, project_zbuffer, DepthMap, Intrinsics};
 use crate::inpainting::{InpaintContext, Inpainter};
 use crate::pipeline::config::WorkingConfig;
 use crate::sources::Frame;
@@ -29,19 +29,12 @@ pub struct View {
     pub seed: u64,
 }
 
-/// Working-resolution depth and intrinsics of a frame (as the build's ingest, official intrinsics map).
-pub fn to_working(frame: &Frame, working: &WorkingConfig) -> Result<(DepthMap, Intrinsics)> {
-    let k0 = &frame.intrinsics;
-    let rc = ResizeCrop::official(k0.width, k0.height, working.size)?;
-    Ok((frame.depth.resize_crop(&rc)?, rc.official_intrinsics(k0)?))
-}
-
 /// The view of `source` seen from `target`'s stored pose (both frames need poses).
 pub fn make_view(source: &Frame, target: &Frame, working: &WorkingConfig, seed: u64) -> Result<View> {
     let pose = |f: &Frame| f.t_world_from_camera.ok_or_else(|| Error::input(&f.depth_path, "frame has no camera pose"));
     let t = pose(target)?.inverse() * pose(source)?;
-    let (depth, k) = to_working(source, working)?;
-    let (captured, _) = to_working(target, working)?;
+    let (depth, k) = working.map_frame(source)?;
+    let (captured, _) = working.map_frame(target)?;
     let memory = working.crop_box.crop(&backproject(&depth, &k, working.depth_range()));
     let proj = project_zbuffer(&memory, &t, &k, false);
     Ok(View { key: format!("{} -> {}", source.key, target.key), condition: proj.depth, known: proj.known, captured, intrinsics: k, seed })

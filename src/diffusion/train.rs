@@ -291,10 +291,10 @@ pub fn train_diffusion(data: &FrameSet, opts: &DiffusionTrainOptions, mut on_rep
         if meta.net != config {
             return Err(Error::config("--resume", format!("{} holds another network ({:?})", latest.display(), meta.net.preset)));
         }
-        checkpoint::copy_into(&latest, &checkpoint::read_group(&latest, ONLINE)?, &online, "online")?;
-        checkpoint::copy_into(&latest, &checkpoint::read_group(&latest, EMA)?, &ema, "EMA")?;
-        checkpoint::copy_into(&latest, &checkpoint::read_group(&latest, "opt.m.")?, &adam.m, "Adam m")?;
-        checkpoint::copy_into(&latest, &checkpoint::read_group(&latest, "opt.v.")?, &adam.v, "Adam v")?;
+        let tensors = checkpoint::read_tensors(&latest)?;
+        for (prefix, vars, what) in [(ONLINE, &online, "online"), (EMA, &ema, "EMA"), ("opt.m.", &adam.m, "Adam m"), ("opt.v.", &adam.v, "Adam v")] {
+            checkpoint::copy_into(&latest, &checkpoint::group(&tensors, prefix), vars, what)?;
+        }
         start = meta.step;
     }
     let save = |step: u64, loss: f64, adam: &Adam| {

@@ -38,6 +38,15 @@ pub use correction::{CorrectionNet, CorrectionNetConfig, UnetCorrector};
 pub use model_path::ModelPath;
 pub use unet::{Preset, Unet, UnetConfig};
 
+/// Sets libtorch's intra-op threads for this process (`--torch-threads`, at least 1).
+pub fn set_torch_threads(n: i32) -> crate::Result<()> {
+    if n < 1 {
+        return Err(crate::Error::config("--torch-threads", "must be at least 1"));
+    }
+    tch::set_num_threads(n);
+    Ok(())
+}
+
 /// Parses a device name: `cpu`, `cuda` (the first GPU) or `cuda:N`.
 pub fn parse_device(name: &str) -> crate::Result<tch::Device> {
     match name {

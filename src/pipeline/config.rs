@@ -144,6 +144,18 @@ impl WorkingConfig {
     pub fn depth_range(&self) -> DepthRange {
         DepthRange { near: self.depth_range[0], far: self.depth_range[1] }
     }
+
+    /// A frame's depth and intrinsics at the working resolution: the official resize and centre crop,
+    /// intrinsics mapped as `intrinsics` says.
+    pub fn map_frame(&self, frame: &crate::sources::Frame) -> Result<(crate::geometry::DepthMap, crate::geometry::Intrinsics)> {
+        let k0 = &frame.intrinsics;
+        let rc = crate::geometry::ResizeCrop::official(k0.width, k0.height, self.size)?;
+        let k = match self.intrinsics {
+            IntrinsicsMap::Official => rc.official_intrinsics(k0)?,
+            IntrinsicsMap::Exact => rc.exact_intrinsics(k0)?,
+        };
+        Ok((frame.depth.resize_crop(&rc)?, k))
+    }
 }
 
 /// Pose sampling: the official pivot sampler, optionally steered towards a target overlap histogram.

@@ -2,9 +2,9 @@
 
 use super::PairUnit;
 use crate::error::{Error, Result};
-use crate::geometry::{backproject, ResizeCrop};
+use crate::geometry::backproject;
 use crate::pipeline::catalog::Catalog;
-use crate::pipeline::config::{IntrinsicsMap, WorkingConfig};
+use crate::pipeline::config::WorkingConfig;
 use crate::runtime::Stage;
 use crate::shards::row::Status;
 use std::sync::Arc;
@@ -24,13 +24,7 @@ impl Ingest {
         if frame.t_world_from_camera.is_none() {
             return Err(Error::input(&frame.depth_path, "frame has no camera pose (missing pose file)"));
         }
-        let k0 = &frame.intrinsics;
-        let rc = ResizeCrop::official(k0.width, k0.height, self.working.size)?;
-        let k = match self.working.intrinsics {
-            IntrinsicsMap::Official => rc.official_intrinsics(k0)?,
-            IntrinsicsMap::Exact => rc.exact_intrinsics(k0)?,
-        };
-        let depth = frame.depth.resize_crop(&rc)?;
+        let (depth, k) = self.working.map_frame(&frame)?;
         let memory = self.working.crop_box.crop(&backproject(&depth, &k, self.working.depth_range()));
         if memory.is_empty() {
             return Err(Error::input(&frame.depth_path, "depth map has no valid pixel inside the depth range and crop box"));
