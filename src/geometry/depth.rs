@@ -32,7 +32,9 @@ impl DepthMap {
 
     /// A map whose values the caller already knows are finite and non-negative (projection output).
     pub(crate) fn from_checked_parts(width: u32, height: u32, data: Vec<f32>) -> Self {
-        debug_assert!(data.len() == width as usize * height as usize && data.iter().all(|v| v.is_finite() && *v >= 0.0));
+        debug_assert!(
+            data.len() == width as usize * height as usize && data.iter().all(|v| v.is_finite() && *v >= 0.0)
+        );
         DepthMap { width, height, data }
     }
 
@@ -47,10 +49,7 @@ impl DepthMap {
         if raw.len() != width as usize * height as usize {
             return Err(Error::InvalidArgument("raw depth size does not match width x height".into()));
         }
-        let data = raw
-            .iter()
-            .map(|&v| if invalid.contains(&v) { 0.0 } else { v as f32 / scale })
-            .collect();
+        let data = raw.iter().map(|&v| if invalid.contains(&v) { 0.0 } else { v as f32 / scale }).collect();
         Ok(DepthMap { width, height, data })
     }
 
@@ -143,62 +142,68 @@ impl DepthRange {
 /// Points of the pixels of `depth` whose depth lies in `range`, in the camera frame, in row-major
 /// pixel order: `x = (c − cx)·z/fx`, `y = (r − cy)·z/fy`.
 pub fn backproject(depth: &DepthMap, k: &Intrinsics, range: DepthRange) -> Vec<Point> {
-    assert_eq!((depth.width, depth.height), (k.width, k.height), "depth map and intrinsics sizes differ");
-    let w = depth.width as usize;
-    let ax: Vec<f32> = (0..w).map(|c| ((c as f64 - k.cx) / k.fx) as f32).collect();
-    const ROWS: usize = 32;
-    let blocks: Vec<Vec<Point>> = depth
-        .data
-        .par_chunks(w * ROWS)
-        .enumerate()
-        .map(|(b, block)| {
-            let mut pts = Vec::with_capacity(block.len());
-            for (rr, row) in block.chunks(w).enumerate() {
-                let ay = (((b * ROWS + rr) as f64 - k.cy) / k.fy) as f32;
-                for (c, &z) in row.iter().enumerate() {
-                    if range.contains(z) {
-                        pts.push(Point::new(ax[c] * z, ay * z, z));
-                    }
-                }
-            }
-            pts
-        })
-        .collect();
-    let mut points = Vec::with_capacity(blocks.iter().map(Vec::len).sum());
-    for b in blocks {
-        points.extend_from_slice(&b);
-    }
-    points
+    backproject_rows(depth, k, range, false).0
 }
 
 /// As [`backproject`], also returning each point's pixel index `r·W + c`.
 pub fn backproject_with_pixels(depth: &DepthMap, k: &Intrinsics, range: DepthRange) -> (Vec<Point>, Vec<u32>) {
+    backproject_rows(depth, k, range, true)
+}
+
+/// Both back-projections: blocks of rows are counted, then each block writes its points (and pixel
+/// indices, when asked) straight into its part of the output, in parallel.
+fn backproject_rows(depth: &DepthMap, k: &Intrinsics, range: DepthRange, with_pixels: bool) -> (Vec<Point>, Vec<u32>) {
+    use std::mem::MaybeUninit;
     assert_eq!((depth.width, depth.height), (k.width, k.height), "depth map and intrinsics sizes differ");
     let w = depth.width as usize;
     let ax: Vec<f32> = (0..w).map(|c| ((c as f64 - k.cx) / k.fx) as f32).collect();
-    let rows: Vec<(Vec<Point>, Vec<u32>)> = depth
-        .data
-        .par_chunks(w)
-        .enumerate()
-        .map(|(r, row)| {
+    const ROWS: usize = 16;
+    let block = (w * ROWS).max(1);
+    let counts: Vec<usize> =
+        depth.data.par_chunks(block).map(|b| b.iter().map(|&z| range.contains(z) as usize).sum()).collect();
+    let n: usize = counts.iter().sum();
+    let mut points: Vec<Point> = Vec::with_capacity(n);
+    let mut pixels: Vec<u32> = Vec::with_capacity(if with_pixels { n } else { 0 });
+    // Each block's slice of the (uninitialised) outputs.
+    fn split<'a, T>(mut rest: &'a mut [MaybeUninit<T>], counts: &[usize]) -> Vec<&'a mut [MaybeUninit<T>]> {
+        counts
+            .iter()
+            .map(|&c| {
+                let (head, tail) = std::mem::take(&mut rest).split_at_mut(c);
+                rest = tail;
+                head
+            })
+            .collect()
+    }
+    let point_parts = split(&mut points.spare_capacity_mut()[..n], &counts);
+    let pixel_parts = match with_pixels {
+        true => split(&mut pixels.spare_capacity_mut()[..n], &counts),
+        false => counts.iter().map(|_| <&mut [MaybeUninit<u32>]>::default()).collect(),
+    };
+    depth.data.par_chunks(block).zip(point_parts).zip(pixel_parts).enumerate().for_each(|(b, ((data, pts), pix))| {
+        let mut j = 0;
+        for (rr, row) in data.chunks(w).enumerate() {
+            let r = b * ROWS + rr;
             let ay = ((r as f64 - k.cy) / k.fy) as f32;
-            let mut pts = Vec::new();
-            let mut pix = Vec::new();
             for (c, &z) in row.iter().enumerate() {
                 if range.contains(z) {
-                    pts.push(Point::new(ax[c] * z, ay * z, z));
-                    pix.push((r * w + c) as u32);
+                    pts[j].write(Point::new(ax[c] * z, ay * z, z));
+                    if with_pixels {
+                        pix[j].write((r * w + c) as u32);
+                    }
+                    j += 1;
                 }
             }
-            (pts, pix)
-        })
-        .collect();
-    let n = rows.iter().map(|(p, _)| p.len()).sum();
-    let mut points = Vec::with_capacity(n);
-    let mut pixels = Vec::with_capacity(n);
-    for (p, i) in rows {
-        points.extend(p);
-        pixels.extend(i);
+        }
+        assert_eq!(j, pts.len(), "a block wrote as many points as it counted");
+    });
+    // SAFETY: every block wrote exactly its count of elements (asserted above), and the blocks' slices
+    // tile the first `n` elements of each output.
+    unsafe {
+        points.set_len(n);
+        if with_pixels {
+            pixels.set_len(n);
+        }
     }
     (points, pixels)
 }
@@ -218,6 +223,40 @@ mod tests {
             assert!((p.x - (c - 15.5) * 2.0 / 100.0).abs() < 1e-6);
             assert!((p.y - (r - 10.0) * 2.0 / 120.0).abs() < 1e-6);
             assert_eq!(p.z, 2.0);
+        }
+    }
+
+    #[test]
+    fn holes_and_range_agree_with_a_pixel_loop_on_any_thread_count() {
+        // 37 rows: blocks of rows end mid-map; a third of the pixels are holes or out of range.
+        let (w, h) = (53u32, 37u32);
+        let k = Intrinsics::new(60.0, 61.0, 26.0, 18.5, w, h).unwrap();
+        let mut r = crate::rng::Rng::new(4);
+        let data: Vec<f32> = (0..w * h)
+            .map(|_| match r.next_u64() % 6 {
+                0 => 0.0,
+                1 => 12.0,
+                _ => r.uniform_range(0.3, 4.0) as f32,
+            })
+            .collect();
+        let d = DepthMap::new(w, h, data).unwrap();
+        let range = DepthRange::OFFICIAL;
+        let (mut pts, mut pix) = (Vec::new(), Vec::new());
+        for row in 0..h as usize {
+            for c in 0..w as usize {
+                let z = d.data()[row * w as usize + c];
+                if range.contains(z) {
+                    let ax = ((c as f64 - k.cx) / k.fx) as f32;
+                    let ay = ((row as f64 - k.cy) / k.fy) as f32;
+                    pts.push(Point::new(ax * z, ay * z, z));
+                    pix.push((row * w as usize + c) as u32);
+                }
+            }
+        }
+        for threads in [1, 3] {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            assert_eq!(pool.install(|| backproject(&d, &k, range)), pts);
+            assert_eq!(pool.install(|| backproject_with_pixels(&d, &k, range)), (pts.clone(), pix.clone()));
         }
     }
 

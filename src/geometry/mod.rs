@@ -12,7 +12,6 @@ pub mod pose;
 pub mod pose_sampling;
 pub mod projection;
 pub mod voxel;
-mod radix;
 
 pub use crop::AxisBox;
 pub use depth::{backproject, backproject_with_pixels, DepthMap, DepthRange};

@@ -1,8 +1,13 @@
 //! Voxel-grid downsampling: one point per occupied voxel, the centroid of the points inside it.
 
-use super::radix::{bits_for, radix_sort_high_bits};
 use super::Point;
 use rayon::prelude::*;
+
+/// Bits per axis of a packed voxel key; cells in `[-2^20, 2^20)` pack, wider clouds take the slower path.
+const AXIS_BITS: u32 = 21;
+const AXIS_BIAS: i64 = 1 << (AXIS_BITS - 1);
+/// Fewest points worth a thread of their own.
+const MIN_POINTS_PER_PART: usize = 32_768;
 
 /// Downsamples `points` to the centroid of each occupied voxel of edge `voxel` metres.
 ///
@@ -15,63 +20,180 @@ pub fn voxel_downsample(points: &[Point], voxel: f32) -> Vec<Point> {
         return Vec::new();
     }
     let inv = 1.0 / voxel as f64;
-    let cell = |p: &Point| -> [i64; 3] {
-        [(p.x as f64 * inv).floor() as i64, (p.y as f64 * inv).floor() as i64, (p.z as f64 * inv).floor() as i64]
-    };
-    let empty = || ([i64::MAX; 3], [i64::MIN; 3]);
-    let (lo, hi) = points
-        .par_chunks(16_384)
-        .map(|chunk| {
-            let (mut lo, mut hi) = empty();
-            for p in chunk {
-                let c = cell(p);
-                for a in 0..3 {
-                    lo[a] = lo[a].min(c[a]);
-                    hi[a] = hi[a].max(c[a]);
-                }
-            }
-            (lo, hi)
-        })
-        .reduce(empty, |(l1, h1), (l2, h2)| {
-            (std::array::from_fn(|a| l1[a].min(l2[a])), std::array::from_fn(|a| h1[a].max(h2[a])))
-        });
-    let bits: [u32; 3] = std::array::from_fn(|a| bits_for((hi[a] - lo[a]) as u64));
-    let idx_bits = bits_for(points.len() as u64 - 1).max(1);
-    let total = bits[0] + bits[1] + bits[2] + idx_bits;
-    if total > 64 {
+    let cell = |p: &Point| -> [i64; 3] { [floor(p.x as f64 * inv), floor(p.y as f64 * inv), floor(p.z as f64 * inv)] };
+    // Key = voxel index biased to non-negative and packed (ix, iy, iz), so keys order voxels
+    // lexicographically; a cell too far from the origin to pack sends the cloud to the slower path.
+    let mut keys = vec![0u64; points.len()];
+    let all_pack = keys.par_chunks_mut(16_384).zip(points.par_chunks(16_384)).all(|(ks, ps)| pack_keys(ps, inv, ks));
+    if !all_pack {
         return downsample_by_sort(points, &cell);
     }
-    // Key = voxel index packed as (ix, iy, iz) lexicographically, then the point index: sorting the keys
-    // orders voxels and keeps input order inside each voxel.
-    let mut keys: Vec<u64> = points
-        .par_iter()
-        .enumerate()
-        .map(|(i, p)| {
-            let c = cell(p);
-            let v = ((c[0] - lo[0]) as u64) << (bits[1] + bits[2]) | ((c[1] - lo[1]) as u64) << bits[2] | (c[2] - lo[2]) as u64;
-            (v << idx_bits) | i as u64
+    // Split the key range into parts of about equal point counts (quantiles of a sample of the keys); each
+    // part is accumulated by one thread walking all points in input order and taking the keys in its range,
+    // so every voxel's sum runs in input order whatever the split.
+    let parts = rayon::current_num_threads().clamp(1, points.len().div_ceil(MIN_POINTS_PER_PART));
+    let mut sample: Vec<u64> = keys.iter().step_by(64).copied().collect();
+    sample.sort_unstable();
+    let bounds: Vec<u64> = (0..=parts)
+        .map(|i| {
+            if i == parts {
+                u64::MAX
+            } else if i == 0 {
+                0
+            } else {
+                sample[i * sample.len() / parts]
+            }
         })
         .collect();
-    radix_sort_high_bits(&mut keys, idx_bits, total);
-    let mask = (1u64 << idx_bits) - 1;
-    let mut out = Vec::new();
-    let (mut current, mut n, mut sum) = (u64::MAX, 0u32, [0.0f64; 3]);
-    for k in keys {
-        let v = k >> idx_bits;
-        if v != current {
-            if n > 0 {
-                out.push(centroid(sum, n));
-            }
-            (current, n, sum) = (v, 0, [0.0; 3]);
-        }
-        let p = &points[(k & mask) as usize];
-        sum[0] += p.x as f64;
-        sum[1] += p.y as f64;
-        sum[2] += p.z as f64;
-        n += 1;
+    let runs: Vec<Vec<Point>> = bounds.par_windows(2).map(|b| accumulate(points, &keys, b[0]..b[1])).collect();
+    runs.concat()
+}
+
+/// Writes the packed key of each point's voxel to `keys`; false when some cell does not pack.
+fn pack_keys(points: &[Point], inv: f64, keys: &mut [u64]) -> bool {
+    #[cfg(target_arch = "x86_64")]
+    if std::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU has AVX2.
+        return unsafe { pack_keys_avx2(points, inv, keys) };
     }
-    out.push(centroid(sum, n));
-    out
+    pack_keys_body(points, inv, keys)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn pack_keys_avx2(points: &[Point], inv: f64, keys: &mut [u64]) -> bool {
+    pack_keys_body(points, inv, keys)
+}
+
+/// Branch-free so that it vectorises: `floor` of the scaled coordinate, range-checked in f64, then turned
+/// into an integer through the bits of `n + 1.5·2^52` (exact for `|n| < 2^51`).
+#[inline(always)]
+fn pack_keys_body(points: &[Point], inv: f64, keys: &mut [u64]) -> bool {
+    const MAGIC: f64 = 6_755_399_441_055_744.0;
+    const LOW: u64 = (1 << AXIS_BITS) - 1;
+    let (lo, hi) = (-AXIS_BIAS as f64, AXIS_BIAS as f64);
+    let mut fits = true;
+    for (k, p) in keys.iter_mut().zip(points) {
+        let axis = |v: f32| -> (u64, bool) {
+            let v = v as f64 * inv;
+            let ok = v >= lo && v < hi;
+            let c = v.max(lo).min(hi).floor() + (AXIS_BIAS as f64 + MAGIC);
+            (c.to_bits() & LOW, ok)
+        };
+        let ((x, ox), (y, oy), (z, oz)) = (axis(p.x), axis(p.y), axis(p.z));
+        fits &= ox & oy & oz;
+        *k = x << (2 * AXIS_BITS) | y << AXIS_BITS | z;
+    }
+    fits
+}
+
+/// Centroids of the voxels whose keys fall in `range`, in key order; sums run in input order.
+fn accumulate(points: &[Point], keys: &[u64], range: std::ops::Range<u64>) -> Vec<Point> {
+    let mut table = VoxelTable::with_slots((points.len() / 16).next_power_of_two().max(1024));
+    // Points of a depth map come row by row, so runs of points share a voxel: look the key up once per run
+    // and sum the run in registers.
+    let mut i = 0;
+    while i < points.len() {
+        let k = keys[i];
+        if !range.contains(&k) {
+            i += 1;
+            continue;
+        }
+        let e = table.entry(k);
+        let Entry { mut sum, mut n, .. } = table.entries[e];
+        while i < points.len() && keys[i] == k {
+            let p = &points[i];
+            sum[0] += p.x as f64;
+            sum[1] += p.y as f64;
+            sum[2] += p.z as f64;
+            n += 1;
+            i += 1;
+        }
+        (table.entries[e].sum, table.entries[e].n) = (sum, n);
+    }
+    let mut entries = table.entries;
+    entries.sort_unstable_by_key(|e| e.key);
+    entries.iter().map(|e| centroid(e.sum, e.n)).collect()
+}
+
+/// One occupied voxel being summed.
+#[derive(Clone, Copy)]
+struct Entry {
+    key: u64,
+    sum: [f64; 3],
+    n: u32,
+}
+
+/// Open-addressing map from voxel key to its entry, grown at half load, in front of which a small
+/// direct-mapped cache of recent keys stays in L1: the next image row mostly revisits the voxels of the last.
+struct VoxelTable {
+    /// Entry index per slot, or `u32::MAX` when the slot is empty.
+    slots: Vec<u32>,
+    entries: Vec<Entry>,
+    /// (key, entry index) of a recent key per cache line; key `u64::MAX` (never packed) when empty.
+    recent: Vec<(u64, u32)>,
+}
+
+/// Entries of [`VoxelTable::recent`] (a power of two).
+const RECENT: usize = 1024;
+
+impl VoxelTable {
+    fn with_slots(n: usize) -> VoxelTable {
+        VoxelTable { slots: vec![u32::MAX; n], entries: Vec::new(), recent: vec![(u64::MAX, 0); RECENT] }
+    }
+
+    fn home(key: u64, mask: usize) -> usize {
+        (key.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 32) as usize & mask
+    }
+
+    /// The index of `key`'s entry, inserted empty when new.
+    fn entry(&mut self, key: u64) -> usize {
+        let line = Self::home(key, RECENT - 1);
+        if self.recent[line].0 == key {
+            return self.recent[line].1 as usize;
+        }
+        let e = self.lookup(key);
+        self.recent[line] = (key, e as u32);
+        e
+    }
+
+    fn lookup(&mut self, key: u64) -> usize {
+        let mask = self.slots.len() - 1;
+        let mut s = Self::home(key, mask);
+        loop {
+            match self.slots[s] {
+                u32::MAX => break,
+                e if self.entries[e as usize].key == key => return e as usize,
+                _ => s = (s + 1) & mask,
+            }
+        }
+        let e = self.entries.len();
+        self.entries.push(Entry { key, sum: [0.0; 3], n: 0 });
+        self.slots[s] = e as u32;
+        if 2 * self.entries.len() > self.slots.len() {
+            self.grow();
+        }
+        e
+    }
+
+    fn grow(&mut self) {
+        self.slots = vec![u32::MAX; self.slots.len() * 2];
+        let mask = self.slots.len() - 1;
+        for (e, entry) in self.entries.iter().enumerate() {
+            let mut s = Self::home(entry.key, mask);
+            while self.slots[s] != u32::MAX {
+                s = (s + 1) & mask;
+            }
+            self.slots[s] = e as u32;
+        }
+    }
+}
+
+/// `v.floor() as i64` (saturating, NaN to 0) without a libm call: truncate, then step down for negative
+/// non-integers.
+fn floor(v: f64) -> i64 {
+    let t = v as i64;
+    t.saturating_sub(((t as f64) > v) as i64)
 }
 
 fn centroid(sum: [f64; 3], n: u32) -> Point {
@@ -79,7 +201,7 @@ fn centroid(sum: [f64; 3], n: u32) -> Point {
     Point::new((sum[0] / n) as f32, (sum[1] / n) as f32, (sum[2] / n) as f32)
 }
 
-/// The same result for extents too wide to pack in 64 bits: sort point indices by (voxel, index).
+/// The same result for clouds too wide to pack: sort point indices by (voxel, index).
 fn downsample_by_sort(points: &[Point], cell: &(dyn Fn(&Point) -> [i64; 3] + Sync)) -> Vec<Point> {
     let cells: Vec<[i64; 3]> = points.par_iter().map(cell).collect();
     let mut order: Vec<u32> = (0..points.len() as u32).collect();
@@ -131,20 +253,75 @@ mod tests {
         let mut r = Rng::new(11);
         for &(n, voxel) in &[(1usize, 0.025f32), (1000, 0.025), (50_000, 0.025), (20_000, 0.002), (5000, 1.0)] {
             let pts: Vec<Point> = (0..n)
-                .map(|_| Point::new(r.uniform_range(-1.5, 1.5) as f32, r.uniform_range(-1.5, 1.5) as f32, r.uniform_range(0.5, 3.5) as f32))
+                .map(|_| {
+                    Point::new(
+                        r.uniform_range(-1.5, 1.5) as f32,
+                        r.uniform_range(-1.5, 1.5) as f32,
+                        r.uniform_range(0.5, 3.5) as f32,
+                    )
+                })
                 .collect();
             assert_eq!(voxel_downsample(&pts, voxel), brute_force(&pts, voxel), "n={n} voxel={voxel}");
         }
     }
 
     #[test]
+    fn agrees_with_brute_force_on_a_scan_ordered_cloud() {
+        // Row-by-row like a back-projected depth map: long runs of points share a voxel, and 120k points
+        // are split into several key ranges when threads are available.
+        let pts: Vec<Point> = (0..300)
+            .flat_map(|r| {
+                (0..400).map(move |c| {
+                    Point::new(c as f32 * 0.003 - 0.6, r as f32 * 0.003 - 0.45, 2.0 + 0.001 * (c % 7) as f32)
+                })
+            })
+            .collect();
+        let expected = brute_force(&pts, 0.025);
+        for threads in [1, 2, 3] {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            assert_eq!(pool.install(|| voxel_downsample(&pts, 0.025)), expected, "{threads} threads");
+        }
+    }
+
+    #[test]
     fn wide_extent_uses_the_fallback_path_and_still_agrees() {
-        // 1 mm voxels over ±1 km need more than 64 key bits.
+        // 1 mm voxels over ±5 km: cells beyond ±2^20 do not pack.
         let mut r = Rng::new(5);
         let pts: Vec<Point> = (0..3000)
-            .map(|_| Point::new(r.uniform_range(-1000.0, 1000.0) as f32, r.uniform_range(-1000.0, 1000.0) as f32, r.uniform_range(-1000.0, 1000.0) as f32))
+            .map(|_| {
+                Point::new(
+                    r.uniform_range(-5000.0, 5000.0) as f32,
+                    r.uniform_range(-5000.0, 5000.0) as f32,
+                    r.uniform_range(-5000.0, 5000.0) as f32,
+                )
+            })
             .collect();
         assert_eq!(voxel_downsample(&pts, 0.001), brute_force(&pts, 0.001));
+    }
+
+    #[test]
+    fn floor_matches_the_standard_floor() {
+        let mut r = Rng::new(2);
+        let special = [
+            0.0,
+            -0.0,
+            0.5,
+            -0.5,
+            -1.0,
+            -1.5,
+            2.0,
+            1e300,
+            -1e300,
+            4.6e18,
+            -9.3e18,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NAN,
+        ];
+        let random = (0..10_000).map(|_| r.uniform_range(-1e6, 1e6));
+        for v in special.into_iter().chain(random) {
+            assert_eq!(floor(v), v.floor() as i64, "{v}");
+        }
     }
 
     #[test]
