@@ -1,8 +1,10 @@
-//! End-to-end benchmark of the classical build path on real 640×480 frames: pairs per second and peak
-//! memory of the `pointreggpt build` process at about 1k and 10k work units (memory must stay flat).
+//! End-to-end benchmark of the build on real 640×480 frames: pairs per second and peak memory of the
+//! `pointreggpt build` process on the classical path at about 1k and 10k work units (memory must stay
+//! flat), then with the shipped networks in place (correction U-Net; correction U-Net + diffusion fill).
 //!
 //! Input: the 400 7-Scenes redkitchen frames of `$POINTREGGPT_REAL_DATA` (default ../shared/realdata),
-//! with `samples_per_frame` 3 (1,200 units) and 25 (10,000 units). Run: `cargo bench --bench pipeline`.
+//! with `samples_per_frame` 3 (1,200 units) and 25 (10,000 units); the network runs take 400 and 100
+//! units. Run: `cargo bench --bench pipeline`.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -21,7 +23,7 @@ struct Run {
     summary: String,
 }
 
-fn run(bin: &Path, config: &Path, out: &Path, samples: u32) -> Run {
+fn run(bin: &Path, config: &Path, out: &Path, samples: u32, units: u64) -> Run {
     let _ = std::fs::remove_dir_all(out);
     let t0 = Instant::now();
     let mut child = Command::new(bin)
@@ -45,7 +47,7 @@ fn run(bin: &Path, config: &Path, out: &Path, samples: u32) -> Run {
     let output = child.wait_with_output().expect("output");
     assert!(output.status.success(), "build failed");
     let summary = String::from_utf8_lossy(&output.stdout).to_string();
-    Run { units: 400 * samples as u64, wall, peak_mib: peak as f64 / 1024.0, summary }
+    Run { units, wall, peak_mib: peak as f64 / 1024.0, summary }
 }
 
 fn main() {
@@ -58,9 +60,25 @@ fn main() {
     let work = std::env::temp_dir().join("pointreggpt-bench-pipeline");
     std::fs::create_dir_all(&work).unwrap();
     let config = work.join("bench.toml");
+    let base = format!(
+        "seed = 1\nshard_size = 200\n[source]\nkind = \"directory\"\npath = \"{}\"\n[output]\ndepth_maps = true\n",
+        frames.display()
+    );
+    std::fs::write(&config, &base).unwrap();
+    let models = root.join("models");
+    let unet = format!(
+        "[correct.condition]\nmethod = \"unet\"\ncheckpoint = \"{}\"\nthreshold = 0.99\n",
+        models.join("correction-tiny.safetensors").display()
+    );
+    let unet_config = work.join("bench-unet.toml");
+    std::fs::write(&unet_config, format!("{base}{unet}")).unwrap();
+    let diffusion_config = work.join("bench-diffusion.toml");
     std::fs::write(
-        &config,
-        format!("seed = 1\nshard_size = 200\n[source]\nkind = \"directory\"\npath = \"{}\"\n[output]\ndepth_maps = true\n", frames.display()),
+        &diffusion_config,
+        format!(
+            "{base}{unet}[select]\nevery = 4\n[inpaint]\nmethod = \"diffusion\"\ncheckpoint = \"{}\"\nsteps = 10\nstart = \"push_pull\"\nstart_step = 50\n",
+            models.join("diffusion-tiny.safetensors").display()
+        ),
     )
     .unwrap();
 
@@ -73,7 +91,7 @@ fn main() {
     println!("{:>8} {:>9} {:>10} {:>14}", "units", "wall s", "pairs/s", "peak RSS MiB");
     let mut runs = Vec::new();
     for samples in [3u32, 25] {
-        let r = run(&bin, &config, &work.join(format!("ds-{samples}")), samples);
+        let r = run(&bin, &config, &work.join(format!("ds-{samples}")), samples, 400 * samples as u64);
         println!("{:>8} {:>9.1} {:>10.1} {:>14.0}", r.units, r.wall.as_secs_f64(), r.units as f64 / r.wall.as_secs_f64(), r.peak_mib);
         runs.push(r);
     }
@@ -89,5 +107,19 @@ fn main() {
         if flat { "met" } else { "NOT met" }
     );
     println!("\nstage breakdown of the 10k run:\n{}", large.summary.lines().skip(4).take(10).collect::<Vec<_>>().join("\n"));
+
+    println!("\nwith the shipped networks (models/*-tiny.safetensors, one libtorch thread per worker):");
+    println!("{:<58} {:>6} {:>8} {:>9} {:>13}", "path", "units", "wall s", "pairs/s", "vs classical");
+    let classical = small.units as f64 / small.wall.as_secs_f64();
+    println!("{:<58} {:>6} {:>8.1} {:>9.1} {:>13}", "classical (min-pool, push-pull), from above", small.units, small.wall.as_secs_f64(), classical, "1.00x");
+    let network_runs = [
+        ("correction U-Net @0.99 + push-pull", &unet_config, 400u64),
+        ("correction U-Net @0.99 + diffusion 10 steps (push-pull start 50)", &diffusion_config, 100),
+    ];
+    for (name, cfg, units) in network_runs {
+        let r = run(&bin, cfg, &work.join("ds-net"), 1, units);
+        let rate = r.units as f64 / r.wall.as_secs_f64();
+        println!("{:<58} {:>6} {:>8.1} {:>9.2} {:>12.3}x", name, r.units, r.wall.as_secs_f64(), rate, rate / classical);
+    }
     let _ = std::fs::remove_dir_all(&work);
 }

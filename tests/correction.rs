@@ -233,6 +233,25 @@ fn training_on_a_small_label_set_lowers_the_loss() {
     assert!((lr[3] / lr[2] - 0.95).abs() < 1e-12);
 }
 
+#[test]
+fn a_drop_weight_trades_kept_wrong_depths_for_dropped_good_ones() {
+    // The same run with drop pixels weighted 1 and 20: the weighted network keeps fewer wrong depths and
+    // drops more good ones at the same tau_m.
+    let set = LabelSet::open(small_labels()).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let confusion = |w: f64| {
+        let mut opts = TrainOptions::for_preset(Preset::Tiny, dir.path().join(format!("w{w}")));
+        (opts.epochs, opts.batch, opts.crop, opts.lr, opts.drop_weight) = (6, 4, None, 3e-3, w);
+        train_correction(&set, &set, &opts, |_| {}).unwrap();
+        let (_vs, net, _) = load_correction(&opts.out.join("latest.safetensors"), Device::Cpu).unwrap();
+        evaluate_net(&net, Device::Cpu, &set, 4, &[0.5]).remove(0).metrics()
+    };
+    let (plain, weighted) = (confusion(1.0), confusion(20.0));
+    eprintln!("FP/map {} -> {}, FN/map {} -> {}", plain.fp_per_map, weighted.fp_per_map, plain.fn_per_map, weighted.fn_per_map);
+    assert!(weighted.fn_per_map > plain.fn_per_map);
+    assert!(weighted.fp_per_map < 0.8 * plain.fp_per_map);
+}
+
 fn outputs(net: &CorrectionNet, x: &Tensor) -> Tensor {
     tch::no_grad(|| net.forward(x))
 }

@@ -3,7 +3,7 @@
 
 use crate::error::{Error, Result};
 use crate::nn::data::LabelSet;
-use crate::nn::evaluate::{evaluate_all, format_table, to_csv};
+use crate::nn::evaluate::{evaluate_all, format_table, to_csv, THRESHOLDS};
 use std::io::Write;
 use std::path::PathBuf;
 
@@ -75,7 +75,7 @@ pub struct EvalInpaintArgs {
 #[command(
     after_help = "Metrics over the pixels with input depth (I_s > 0; only those can be kept or dropped), pooled over all maps: \
 2-class mIoU (keep and drop), pixel accuracy, FP = wrong depths kept per map (label drop, predicted keep), FN = good depths \
-dropped per map, SAE = the official depth-weighted error per map. U-Nets are reported at tau_m 0.5 and 0.99; the handcrafted \
+dropped per map, SAE = the official depth-weighted error per map. U-Nets are reported at tau_m 0.5 and 0.99 (or each --tau); the handcrafted \
 filters (min-pool and 3x3 median, 0.0375 m) have no tau_m and are reported once."
 )]
 pub struct EvalCorrectionArgs {
@@ -97,11 +97,22 @@ pub struct EvalCorrectionArgs {
     /// Maps per forward pass.
     #[arg(long, default_value_t = 4)]
     pub batch: usize,
+    /// Keep thresholds tau_m the U-Nets are reported at (a pixel is kept when its keep probability is above
+    /// it); repeat for several.
+    #[arg(long = "tau", default_values_t = THRESHOLDS, value_parser = parse_tau)]
+    pub taus: Vec<f32>,
     /// libtorch intra-op threads. 1 by default: on a shared or small machine more threads than idle cores
     /// make libtorch's OpenMP workers spin (a 2-core machine with one other busy process ran a training step
     /// 5-10x slower with 2 threads than with 1).
     #[arg(long, default_value_t = 1)]
     pub torch_threads: i32,
+}
+
+fn parse_tau(s: &str) -> std::result::Result<f32, String> {
+    match s.parse::<f32>() {
+        Ok(t) if (0.0..1.0).contains(&t) => Ok(t),
+        _ => Err(format!("tau_m must be a number in [0, 1), got {s:?}")),
+    }
 }
 
 pub fn run(args: &EvalArgs, out: &mut dyn Write) -> Result<()> {
@@ -121,7 +132,7 @@ fn run_correction(a: &EvalCorrectionArgs, out: &mut dyn Write) -> Result<()> {
         checkpoints.push(("U-Net, no augmentation".to_string(), p.clone()));
     }
     checkpoints.push(("U-Net + DepthAugment".to_string(), a.checkpoint.clone()));
-    let rows = evaluate_all(&set, &checkpoints, device, a.batch)?;
+    let rows = evaluate_all(&set, &checkpoints, device, a.batch, &a.taus)?;
     let (px, drop) = set.pixel_counts();
     writeln!(
         out,

@@ -78,11 +78,18 @@ pub fn handcrafted_rows(set: &LabelSet) -> Result<Vec<EvalRow>> {
         .collect()
 }
 
-/// Rows of a checkpoint at each τ_m of [`THRESHOLDS`].
-pub fn checkpoint_rows(name: &str, path: &Path, set: &LabelSet, device: Device, batch: usize) -> Result<Vec<EvalRow>> {
+/// Rows of a checkpoint at each τ_m of `thresholds`.
+pub fn checkpoint_rows(
+    name: &str,
+    path: &Path,
+    set: &LabelSet,
+    device: Device,
+    batch: usize,
+    thresholds: &[f32],
+) -> Result<Vec<EvalRow>> {
     let (_vs, net, _) = super::checkpoint::load_correction(path, device)?;
-    let confusions = evaluate_net(&net, device, set, batch, &THRESHOLDS);
-    Ok(THRESHOLDS
+    let confusions = evaluate_net(&net, device, set, batch, thresholds);
+    Ok(thresholds
         .iter()
         .zip(confusions)
         .map(|(&t, c)| EvalRow { method: name.to_string(), tau_m: Some(t), metrics: c.metrics() })
@@ -95,13 +102,14 @@ pub fn evaluate_all(
     checkpoints: &[(String, PathBuf)],
     device: Device,
     batch: usize,
+    thresholds: &[f32],
 ) -> Result<Vec<EvalRow>> {
     if set.is_empty() {
         return Err(Error::InvalidArgument("the evaluation label set has no `ok` rows".into()));
     }
     let mut rows = handcrafted_rows(set)?;
     for (name, path) in checkpoints {
-        rows.extend(checkpoint_rows(name, path, set, device, batch)?);
+        rows.extend(checkpoint_rows(name, path, set, device, batch, thresholds)?);
     }
     Ok(rows)
 }
