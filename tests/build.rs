@@ -61,6 +61,39 @@ fn a_pair_is_geometrically_consistent_with_its_pose() {
     }
 }
 
+#[test]
+fn successive_views_fuse_into_one_target_drawn_from_the_scene_memory() {
+    // No correction and no fill: every view is pure re-projection of the scene memory, so every fused
+    // target point must land back on the source surface under the stored pose, whichever view it came from
+    // (a view moved with the wrong transform would not). Sources and first poses are the single-view
+    // build's, the fused target is larger, and the thread count changes nothing.
+    let dir = tempfile::tempdir().unwrap();
+    let base = synthetic_config(1, 20, 5, 1, 320, 240, 8)
+        + "[correct.condition]\nmethod = \"none\"\n[correct.output]\nmethod = \"none\"\n[inpaint]\nmethod = \"none\"\n";
+    let three = format!("{base}[successive]\nviews = 3\n");
+    build_in_process(&base, &dir.path().join("one"), 2);
+    let a = build_in_process(&three, &dir.path().join("three-a"), 1);
+    let b = build_in_process(&three, &dir.path().join("three-b"), 2);
+    assert_eq!(a, b);
+    let one = Dataset::open(dir.path().join("one")).unwrap().read_pairs().unwrap();
+    let three = Dataset::open(dir.path().join("three-a")).unwrap().read_pairs().unwrap();
+    assert_eq!(one.len(), 4);
+    let (mut n1, mut n3) = (0, 0);
+    for (r1, r3) in one.iter().zip(&three) {
+        assert_eq!(r1.unit_index, r3.unit_index);
+        assert_eq!(r1.source_points, r3.source_points);
+        assert_eq!(r1.t_target_from_source, r3.t_target_from_source);
+        n1 += r1.target_points.len();
+        n3 += r3.target_points.len();
+        let pose = pointreggpt::geometry::pose_from_rows(&r3.t_target_from_source).unwrap();
+        let ov = pointreggpt::geometry::overlap(&r3.source_points, &r3.target_points, &pose, 0.0375);
+        assert!(ov.target > 0.97, "unit {}: only {:.3} of the fused target lies on the source", r3.unit_index, ov.target);
+        assert!(r3.stages.contains("\"successive\""));
+        assert!(!r1.stages.contains("successive"));
+    }
+    assert!(n3 as f64 > 1.2 * n1 as f64, "fused targets {n3} points vs single views {n1}");
+}
+
 /// Spawns `pointreggpt build` on `config` into `out`, with extra args.
 fn spawn_build(config: &Path, out: &Path, extra: &[&str]) -> std::process::Child {
     bin()

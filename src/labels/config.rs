@@ -170,6 +170,7 @@ impl LabelsConfig {
             pose: self.pose.clone(),
             correct: Default::default(),
             inpaint: crate::inpainting::InpaintConfig::None,
+            successive: Default::default(),
             voxelize: Default::default(),
             validate: Default::default(),
             output: Default::default(),

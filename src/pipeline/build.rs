@@ -14,6 +14,7 @@ use crate::stages::pack::Pack;
 use crate::stages::pose::PoseSampling;
 use crate::stages::reproject::Reproject;
 use crate::stages::sink::ShardSink;
+use crate::stages::successive::Successive;
 use crate::stages::validate::ValidateOverlap;
 use crate::stages::voxelize::Voxelize;
 use crate::stages::PairUnit;
@@ -97,7 +98,13 @@ fn build_stages(config: &BuildConfig, catalog: Arc<Catalog>, strict: bool, threa
     let w = &config.working;
     let n = threads;
     let mut inpainters = (0..n).map(|_| config.inpaint.build()).collect::<Result<Vec<_>>>()?.into_iter();
-    Ok(vec![
+    let sv = &config.successive;
+    let mut successive_inpainters = match sv.is_off() {
+        true => Vec::new(),
+        false => (0..n).map(|_| config.inpaint.build()).collect::<Result<Vec<_>>>()?,
+    }
+    .into_iter();
+    let mut stages = vec![
         StageSpec::replicated(n, || Ingest { catalog: catalog.clone(), working: w.clone(), strict }),
         StageSpec::replicated(n, || PoseSampling {
             sampler: config.pose.pivot_sampler(),
@@ -109,6 +116,20 @@ fn build_stages(config: &BuildConfig, catalog: Arc<Catalog>, strict: bool, threa
         StageSpec::replicated(n, || Correct { target: Target::Condition, corrector: config.correct.condition.build() }),
         StageSpec::replicated(n, || Inpaint { inpainter: inpainters.next().expect("one inpainter per worker") }),
         StageSpec::replicated(n, || Correct { target: Target::Output, corrector: config.correct.output.build() }),
+    ];
+    if !sv.is_off() {
+        stages.push(StageSpec::replicated(n, || Successive {
+            views: sv.views,
+            memory_voxel: sv.memory_voxel,
+            sampler: config.pose.pivot_sampler(),
+            condition: config.correct.condition.build(),
+            inpainter: successive_inpainters.next().expect("one inpainter per worker"),
+            output: config.correct.output.build(),
+            depth_range: w.depth_range(),
+            crop_box: w.crop_box,
+        }));
+    }
+    stages.extend([
         StageSpec::replicated(n, || Voxelize { voxel: config.voxelize.voxel, min_points: config.voxelize.min_points, depth_range: w.depth_range(), crop_box: w.crop_box }),
         StageSpec::replicated(n, || ValidateOverlap { config: config.validate.clone() }),
         StageSpec::replicated(n, || Pack {
@@ -118,12 +139,13 @@ fn build_stages(config: &BuildConfig, catalog: Arc<Catalog>, strict: bool, threa
             depth_maps: config.output.depth_maps,
             size: w.size,
         }),
-    ])
+    ]);
+    Ok(stages)
 }
 
 /// The provenance record of the stages: names and parameters (and model hashes when models exist).
 fn stages_json(config: &BuildConfig) -> String {
-    let v = serde_json::json!([
+    let mut v = serde_json::json!([
         {"stage": "ingest", "select": config.select, "working": config.working},
         {"stage": "pose", "sampler": "pivot", "params": config.pose},
         {"stage": "reproject", "zbuffer": "nearest", "rounding": "half_even"},
@@ -133,6 +155,10 @@ fn stages_json(config: &BuildConfig) -> String {
         {"stage": "voxelize", "params": config.voxelize},
         {"stage": "validate", "params": config.validate},
     ]);
+    if !config.successive.is_off() {
+        let arr = v.as_array_mut().expect("an array");
+        arr.insert(6, serde_json::json!({"stage": "successive", "params": config.successive}));
+    }
     v.to_string()
 }
 

@@ -42,6 +42,10 @@ pub struct BuildConfig {
     /// How unknown target pixels are filled.
     #[serde(default = "default_inpaint")]
     pub inpaint: InpaintConfig,
+    /// The official "successive" mode: several target views per pair sharing a growing scene memory,
+    /// fused into one target cloud. Off (one view) by default, as in the authors' dataset generation.
+    #[serde(default, skip_serializing_if = "SuccessiveConfig::is_off")]
+    pub successive: SuccessiveConfig,
     /// Point-cloud voxelization and the minimum size of a cloud.
     #[serde(default)]
     pub voxelize: VoxelizeConfig,
@@ -231,6 +235,31 @@ impl Default for CorrectConfig {
     }
 }
 
+/// The official `num_samples > 1` generation (reference §2, §3.3): the pair's target is several views at
+/// independently drawn poses (each relative to the source camera); every view is re-projected from a scene
+/// memory that holds the source points and the views generated so far (voxel-downsampled), corrected and
+/// inpainted like the first, and the views are fused into one target cloud in the first view's camera.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SuccessiveConfig {
+    /// Target views fused into the target cloud (1 = off, one view per pair).
+    pub views: u32,
+    /// Voxel of the scene memory after each view is added, metres (official `memory_voxel_size` 0.002).
+    pub memory_voxel: f32,
+}
+
+impl SuccessiveConfig {
+    pub fn is_off(&self) -> bool {
+        self.views <= 1
+    }
+}
+
+impl Default for SuccessiveConfig {
+    fn default() -> Self {
+        SuccessiveConfig { views: 1, memory_voxel: 0.002 }
+    }
+}
+
 /// Voxelization of both clouds (each in its own camera frame, after the crop box).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -381,6 +410,13 @@ impl BuildConfig {
         self.correct.condition.validate("correct.condition")?;
         self.correct.output.validate("correct.output")?;
         self.inpaint.validate("inpaint")?;
+        let sv = &self.successive;
+        if sv.views == 0 || sv.views > 64 {
+            return bad("successive.views", "must be 1..=64");
+        }
+        if !(sv.memory_voxel.is_finite() && sv.memory_voxel >= 0.0005 && sv.memory_voxel <= 0.1) {
+            return bad("successive.memory_voxel", "must be 0.0005..=0.1 metres");
+        }
         let v = &self.voxelize;
         if !(v.voxel.is_finite() && v.voxel >= 0.001 && v.voxel <= 1.0) {
             return bad("voxelize.voxel", "must be 0.001..=1 metres");
@@ -429,6 +465,21 @@ mod tests {
         let mut c = BuildConfig::from_toml(MINIMAL, "t").unwrap();
         c.pose.target = Some(OverlapTarget { bin_edges: vec![0.5, 0.2], weights: vec![1.0], max_draws: 4 });
         assert!(c.validate().unwrap_err().to_string().contains("pose.target.bin_edges"));
+        let mut c = BuildConfig::from_toml(MINIMAL, "t").unwrap();
+        c.successive.views = 0;
+        assert!(c.validate().unwrap_err().to_string().contains("successive.views"));
+        c.successive = SuccessiveConfig { views: 4, memory_voxel: 0.0 };
+        assert!(c.validate().unwrap_err().to_string().contains("successive.memory_voxel"));
+    }
+
+    #[test]
+    fn single_view_configs_serialise_without_a_successive_table() {
+        // Datasets made before successive views existed keep their canonical TOML and hashes.
+        let c = BuildConfig::from_toml(MINIMAL, "t").unwrap();
+        assert!(!c.to_toml().contains("successive"));
+        let s = BuildConfig::from_toml(&format!("{MINIMAL}[successive]\nviews = 3\n"), "t").unwrap();
+        assert!(s.to_toml().contains("[successive]"));
+        assert_ne!(c.content_hash(), s.content_hash());
     }
 
     #[test]

@@ -20,10 +20,19 @@ impl Stage<PairUnit> for Inpaint {
 
     fn process(&mut self, unit: &mut PairUnit) -> Result<()> {
         let condition = unit.condition.as_ref().expect("reproject sets the condition");
-        // A sub-stream of the unit's seed, apart from the pose sampler's.
-        let seed = Rng::new(unit.seed).fork(NOISE_STREAM).next_u64();
-        let ctx = InpaintContext { intrinsics: unit.k.expect("ingest sets the intrinsics"), seed };
+        let ctx = InpaintContext { intrinsics: unit.k.expect("ingest sets the intrinsics"), seed: noise_seed(unit.seed, 0) };
         unit.target_depth = Some(self.inpainter.inpaint(condition, &unit.known, &ctx));
         Ok(())
     }
+}
+
+/// The inpainting noise seed of target view `view` (0 = the pair's first view) of a unit: a sub-stream of
+/// the unit's seed, apart from the pose sampler's.
+pub fn noise_seed(unit_seed: u64, view: u32) -> u64 {
+    let stream = Rng::new(unit_seed).fork(NOISE_STREAM);
+    match view {
+        0 => stream,
+        v => stream.fork(v as u64),
+    }
+    .next_u64()
 }

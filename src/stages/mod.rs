@@ -1,7 +1,8 @@
 //! The build pipeline's operators, one file each: thin adapters from the pure functions of
 //! `geometry`, `correction` and `inpainting` to the runtime's [`Stage`](crate::runtime::Stage) trait.
 //!
-//! ingest → pose → reproject → correct(condition) → inpaint → correct(output) → voxelize → validate → pack → sink
+//! ingest → pose → reproject → correct(condition) → inpaint → correct(output) → [successive] → voxelize →
+//! validate → pack → sink (successive only when a pair has several target views)
 
 pub mod correct;
 pub mod ingest;
@@ -10,6 +11,7 @@ pub mod pack;
 pub mod pose;
 pub mod reproject;
 pub mod sink;
+pub mod successive;
 pub mod unit;
 pub mod validate;
 pub mod voxelize;

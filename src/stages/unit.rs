@@ -32,8 +32,11 @@ pub struct PairUnit {
     /// Re-projected condition (after correction) and its known-pixel mask.
     pub condition: Option<DepthMap>,
     pub known: Vec<bool>,
-    /// Final target depth (inpainted, corrected).
+    /// Final target depth (inpainted, corrected); with successive views, the first view's.
     pub target_depth: Option<DepthMap>,
+    /// With successive views: all views fused, in the first view's camera frame, cropped to the box (the
+    /// voxelize stage takes it instead of back-projecting `target_depth`).
+    pub fused_target: Option<Vec<Point>>,
     /// Voxelized clouds, each in its own camera frame.
     pub source_points: Vec<Point>,
     pub target_points: Vec<Point>,
@@ -65,6 +68,7 @@ impl PairUnit {
             condition: None,
             known: Vec::new(),
             target_depth: None,
+            fused_target: None,
             source_points: Vec::new(),
             target_points: Vec::new(),
             overlap: Overlap { source: 0.0, target: 0.0 },

@@ -21,7 +21,10 @@ impl Stage<PairUnit> for Voxelize {
     fn process(&mut self, unit: &mut PairUnit) -> Result<()> {
         let k = unit.k.expect("ingest sets the intrinsics");
         let target = unit.target_depth.as_ref().expect("inpaint sets the target");
-        let target_points = self.crop_box.crop(&backproject(target, &k, self.depth_range));
+        let target_points = match unit.fused_target.take() {
+            Some(fused) => fused,
+            None => self.crop_box.crop(&backproject(target, &k, self.depth_range)),
+        };
         let (s, t) = rayon::join(|| voxel_downsample(&unit.memory, self.voxel), || voxel_downsample(&target_points, self.voxel));
         unit.source_points = s;
         unit.target_points = t;
