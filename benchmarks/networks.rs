@@ -439,6 +439,8 @@ impl PeerSession {
 
 struct TinyRun {
     denoiser_ms: f64,
+    /// One forward of four views.
+    denoiser_b4_ms: f64,
     denoiser_params: i64,
     denoiser_weights: String,
     correction_ms: f64,
@@ -495,6 +497,9 @@ fn run_tiny() -> TinyRun {
     let t = Tensor::from_slice(&[500i64]);
     let k = Tensor::from_slice(&intrinsics(1)).view([1, 4]);
     let (denoiser_ms, _) = median_ms(TINY_WARMUP, TINY_REPS, || tch::no_grad(|| denoiser.forward(&x, &t, &k)));
+    // `[inpaint] batch = 4`: four views per forward pass.
+    let (x4, t4, k4) = (x.repeat([4, 1, 1, 1]), t.repeat([4]), k.repeat([4, 1]));
+    let (denoiser_b4_ms, _) = median_ms(TINY_WARMUP, TINY_REPS, || tch::no_grad(|| denoiser.forward(&x4, &t4, &k4)));
 
     let (cvs, correction, correction_weights) = tiny_correction();
     let depth = depth_input(1);
@@ -514,6 +519,7 @@ fn run_tiny() -> TinyRun {
         median_ms(1, DDIM_REPS, || ddnm_sample(&denoiser, &schedule, &opts, n, n, &problem, Device::Cpu));
     TinyRun {
         denoiser_ms,
+        denoiser_b4_ms,
         denoiser_params: parameter_count(&dvs),
         denoiser_weights,
         correction_ms,
@@ -614,6 +620,14 @@ fn print_tiny(t: &TinyRun, denoiser: &PaperRun) {
     println!(
         "{:<44} {:>10}  {:>9.2} ms  {}",
         "tiny denoiser, one forward", t.denoiser_params, t.denoiser_ms, t.denoiser_weights
+    );
+    println!(
+        "{:<44} {:>10}  {:>9.2} ms  per view ({:.2} ms for 4; batch 1 / batch 4 per view = {:.2}x)",
+        "tiny denoiser, one forward at batch 4",
+        t.denoiser_params,
+        t.denoiser_b4_ms / 4.0,
+        t.denoiser_b4_ms,
+        t.denoiser_ms / (t.denoiser_b4_ms / 4.0)
     );
     println!(
         "{:<44} {:>10}  {:>9.2} ms  {}",

@@ -111,6 +111,36 @@ fn the_inpainter_keeps_metric_depths_exactly_and_fills_the_holes() {
 }
 
 /// Frames of 2 synthetic scenes at 64x64 (official intrinsics map), every 10th of 40.
+#[test]
+fn a_view_gives_the_same_result_whichever_views_share_its_batch() {
+    // Batch 4: five views go as [d e a b] + [c, padding]; three as [a b c, padding]; one as [a, padding].
+    // Every forward pass has 4 views, so each view's output is bit-identical across groupings.
+    let (vs, net) = tiny(5);
+    let inpainter = DiffusionInpainter::new(vs, net, SamplerOptions { steps: 3, eta: 1.0, start_step: None }).with_batch(4);
+    let (w, h) = (64u32, 48u32);
+    let k = Intrinsics::new(60.0, 60.0, 32.0, 24.0, w, h).unwrap();
+    let views: Vec<(DepthMap, Vec<bool>, InpaintContext)> = (0..5u64)
+        .map(|i| {
+            let mut r = Rng::new(100 + i);
+            let d: Vec<f32> = (0..w * h).map(|_| r.uniform_range(0.6, 4.0) as f32).collect();
+            let known: Vec<bool> = (0..w * h).map(|_| r.uniform() < 0.4).collect();
+            (DepthMap::new(w, h, d).unwrap(), known, InpaintContext { intrinsics: k, seed: 7 + i })
+        })
+        .collect();
+    let v = |i: usize| (&views[i].0, views[i].1.as_slice(), &views[i].2);
+    let (a, b, c, d, e) = (0, 1, 2, 3, 4);
+    let three = inpainter.inpaint_batch(&[v(a), v(b), v(c)]);
+    let five = inpainter.inpaint_batch(&[v(d), v(e), v(a), v(b), v(c)]);
+    let alone = inpainter.inpaint(&views[a].0, &views[a].1, &views[a].2);
+    assert_eq!(three.len(), 3);
+    assert_eq!(five.len(), 5);
+    assert_eq!(three[0], alone);
+    assert_eq!(five[2], alone);
+    assert_eq!(three[1], five[3]);
+    assert_eq!(three[2], five[4]);
+    assert_ne!(five[0], five[1], "different views, different fills");
+}
+
 fn small_frames() -> FrameSet {
     let dir = tempfile::tempdir().unwrap();
     let cfg = dir.path().join("frames.toml");
@@ -248,27 +278,28 @@ fn the_authors_key_layout_loads_without_metadata() {
 
 #[test]
 fn a_build_with_the_diffusion_fill_keeps_the_condition_and_is_deterministic_across_threads() {
-    // An untrained tiny denoiser: the test is about wiring, exactness and determinism, not realism.
+    // An untrained tiny denoiser: the test is about wiring, exactness and determinism, not realism. With
+    // `batch = 3` the inpaint stage takes the units waiting for it together, so batches form differently
+    // on 1 and 2 threads; the pairs must not change.
     let dir = tempfile::tempdir().unwrap();
     let ckpt = save_untrained(dir.path(), 7);
-    let cfg = dir.path().join("build.toml");
-    std::fs::write(
-        &cfg,
-        format!(
-            "{}[working]\nsize = 64\n[inpaint]\nmethod = \"diffusion\"\ncheckpoint = {:?}\nsteps = 3\n[correct.output]\nmethod = \"none\"\n[output]\ndepth_maps = true\n",
+    for batch in [1, 3] {
+        let text = format!(
+            "{}[working]\nsize = 64\n[inpaint]\nmethod = \"diffusion\"\ncheckpoint = {:?}\nsteps = 3\nbatch = {batch}\n[correct.output]\nmethod = \"none\"\n[output]\ndepth_maps = true\n",
             support::synthetic_config(1, 30, 10, 2, 640, 480, 4),
             ckpt.display().to_string()
-        ),
-    )
-    .unwrap();
-    let text = std::fs::read_to_string(&cfg).unwrap();
-    let config = BuildConfig::from_toml(&text, "test").unwrap();
+        );
+        build_twice_and_compare(&BuildConfig::from_toml(&text, "test").unwrap(), &dir.path().join(format!("b{batch}")));
+    }
+}
+
+fn build_twice_and_compare(config: &BuildConfig, dir: &Path) {
     let mut digests = Vec::new();
     for threads in [1, 2] {
-        let out = dir.path().join(format!("ds{threads}"));
+        let out = dir.join(format!("ds{threads}"));
         let opts = BuildOptions { out: out.clone(), worker: 0, workers: 1, strict: true, progress: false };
         let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
-        pool.install(|| run_build(&config, &opts, &CancelToken::new())).unwrap();
+        pool.install(|| run_build(config, &opts, &CancelToken::new())).unwrap();
         let rows = Dataset::open(&out).unwrap().read_pairs().unwrap();
         assert_eq!(rows.len(), 6, "3 frames x 2 samples");
         let mut checked = 0;
@@ -370,7 +401,7 @@ fn a_torchscript_denoiser_samples_like_the_native_one() {
     }
     let sampler = SamplerOptions { steps: 3, eta: 1.0, start_step: None };
     let native = DiffusionInpainter::new(vs, net, sampler);
-    let config = DiffusionInpaintConfig { checkpoint: ModelPath::new(path.to_str().unwrap()), steps: 3, eta: 1.0, start: Start::Noise, start_step: 500 };
+    let config = DiffusionInpaintConfig { checkpoint: ModelPath::new(path.to_str().unwrap()), steps: 3, eta: 1.0, start: Start::Noise, start_step: 500, batch: 1 };
     config.validate("inpaint").unwrap();
     let scripted = DiffusionInpainter::load(&config, Device::Cpu).unwrap();
     let (w, h) = (32u32, 24u32);
@@ -394,7 +425,7 @@ fn a_torchscript_denoiser_samples_like_the_native_one() {
     }
     // A file that is neither safetensors nor TorchScript is refused with its name.
     std::fs::write(&path, b"PK\x03\x04 broken").unwrap();
-    let err = DiffusionInpaintConfig { checkpoint: ModelPath::new(path.to_str().unwrap()), steps: 3, eta: 1.0, start: Start::Noise, start_step: 500 }.validate("inpaint").unwrap_err();
+    let err = DiffusionInpaintConfig { checkpoint: ModelPath::new(path.to_str().unwrap()), steps: 3, eta: 1.0, start: Start::Noise, start_step: 500, batch: 1 }.validate("inpaint").unwrap_err();
     assert!(err.to_string().contains("denoiser.pt"), "{err}");
 }
 

@@ -193,6 +193,7 @@ fn run_inpaint(a: &EvalInpaintArgs, out: &mut dyn Write) -> Result<()> {
             eta: 1.0,
             start,
             start_step: a.start_step,
+            batch: 1,
         });
         diffusion.validate("--diffusion")?;
         fills.push(NamedFill { name, inpainter: diffusion.build()? });

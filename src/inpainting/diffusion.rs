@@ -34,6 +34,19 @@ pub struct DiffusionInpaintConfig {
     /// The step a `push_pull` start is noised to (0..=999).
     #[serde(default = "default_start_step")]
     pub start_step: usize,
+    /// Views per forward pass (the authors' generator: 4). Every forward pass has exactly this many views
+    /// (a short batch is padded), so a view's result does not depend on which views share its batch;
+    /// results differ from another batch size by float rounding (~1e-6), hence part of the config.
+    #[serde(default = "one", skip_serializing_if = "is_one")]
+    pub batch: usize,
+}
+
+fn one() -> usize {
+    1
+}
+
+fn is_one(n: &usize) -> bool {
+    *n == 1
 }
 
 /// The initial state of the sampling chain.
@@ -66,6 +79,9 @@ impl DiffusionInpaintConfig {
         if self.start_step > 999 {
             return Err(Error::config(field, "start_step must be in 0..=999"));
         }
+        if self.batch == 0 || self.batch > 256 {
+            return Err(Error::config(field, "batch must be in 1..=256"));
+        }
         let path = self.checkpoint.as_path();
         let checked = match is_torchscript(path) {
             Ok(true) => load_model(path, Device::Cpu).map(|_| ()),
@@ -87,11 +103,14 @@ pub struct DiffusionInpainter {
     schedule: Schedule,
     sampler: SamplerOptions,
     device: Device,
+    /// Views per forward pass; short batches are padded to it.
+    batch: usize,
 }
 
 impl DiffusionInpainter {
     pub fn load(config: &DiffusionInpaintConfig, device: Device) -> Result<Self> {
-        Ok(Self::from_model(load_model(config.checkpoint.as_path(), device)?, config.sampler(), device))
+        let model = load_model(config.checkpoint.as_path(), device)?;
+        Ok(Self::from_model(model, config.sampler(), device).with_batch(config.batch))
     }
 
     /// Wraps a network whose variables live in `vs`.
@@ -102,11 +121,17 @@ impl DiffusionInpainter {
 
     /// Wraps any x0 predictor on `device`.
     pub fn from_model(model: Box<dyn X0Model>, sampler: SamplerOptions, device: Device) -> Self {
-        DiffusionInpainter { model: Mutex::new(model), schedule: Schedule::official(), sampler, device }
+        DiffusionInpainter { model: Mutex::new(model), schedule: Schedule::official(), sampler, device, batch: 1 }
     }
 
-    /// Inpaints several same-sized views in one batch (one forward pass per step for all of them).
-    pub fn inpaint_batch(&self, views: &[(&DepthMap, &[bool], &InpaintContext)]) -> Vec<DepthMap> {
+    /// Runs every forward pass with `batch` views.
+    pub fn with_batch(mut self, batch: usize) -> Self {
+        self.batch = batch.max(1);
+        self
+    }
+
+    /// Samples same-sized views together (one forward pass per step for all of them).
+    fn sample(&self, views: &[(&DepthMap, &[bool], &InpaintContext)]) -> Vec<DepthMap> {
         let Some((first, _, _)) = views.first() else { return Vec::new() };
         let (w, h) = (first.width() as usize, first.height() as usize);
         let ys: Vec<Vec<f32>> = views
@@ -167,7 +192,27 @@ impl Inpainter for DiffusionInpainter {
 
     /// Runs with one libtorch intra-op thread (the pipeline runs one inpainter call per worker thread).
     fn inpaint(&self, depth: &DepthMap, known: &[bool], ctx: &InpaintContext) -> DepthMap {
-        tch::set_num_threads(1);
         self.inpaint_batch(&[(depth, known, ctx)]).pop().expect("one view")
+    }
+
+    fn batch(&self) -> usize {
+        self.batch
+    }
+
+    /// Groups of `batch` views; a short group is padded with copies of its first view (their results are
+    /// dropped), so every forward pass has the same batch size and a view's result is the same whichever
+    /// views it is grouped with.
+    fn inpaint_batch(&self, views: &[(&DepthMap, &[bool], &InpaintContext)]) -> Vec<DepthMap> {
+        tch::set_num_threads(1);
+        views
+            .chunks(self.batch)
+            .flat_map(|group| {
+                let mut padded = group.to_vec();
+                padded.resize(self.batch, group[0]);
+                let mut out = self.sample(&padded);
+                out.truncate(group.len());
+                out
+            })
+            .collect()
     }
 }

@@ -25,6 +25,14 @@ pub trait Inpainter: Send + Sync {
     /// A full depth map whose known pixels equal `depth` bit for bit and whose unknown pixels are filled
     /// (or left 0 where the method cannot fill).
     fn inpaint(&self, depth: &DepthMap, known: &[bool], ctx: &InpaintContext) -> DepthMap;
+    /// How many views [`Inpainter::inpaint_batch`] fills together at best (1: one at a time).
+    fn batch(&self) -> usize {
+        1
+    }
+    /// Fills several views; each result is what [`Inpainter::inpaint`] gives for that view alone.
+    fn inpaint_batch(&self, views: &[(&DepthMap, &[bool], &InpaintContext)]) -> Vec<DepthMap> {
+        views.iter().map(|(d, known, ctx)| self.inpaint(d, known, ctx)).collect()
+    }
 }
 
 /// Leaves unknown pixels empty.

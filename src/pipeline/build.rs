@@ -3,6 +3,7 @@
 use super::catalog::{check_worker, plan_shards, shard_count, shard_units, Catalog};
 use super::config::BuildConfig;
 use crate::error::Result;
+use crate::inpainting::InpaintConfig;
 use crate::rng::unit_seed;
 use crate::runtime::{run_pipeline, CancelToken, RunSummary, StageSpec};
 use crate::shards::dataset::Dataset;
@@ -99,9 +100,15 @@ fn build_stages(config: &BuildConfig, catalog: Arc<Catalog>, strict: bool, threa
     let n = threads;
     let mut inpainters = (0..n).map(|_| config.inpaint.build()).collect::<Result<Vec<_>>>()?.into_iter();
     let sv = &config.successive;
+    // Successive views come one after another (each needs the memory the previous one grew), so their
+    // inpainter fills one view per forward pass.
+    let mut one_at_a_time = config.inpaint.clone();
+    if let InpaintConfig::Diffusion(d) = &mut one_at_a_time {
+        d.batch = 1;
+    }
     let mut successive_inpainters = match sv.is_off() {
         true => Vec::new(),
-        false => (0..n).map(|_| config.inpaint.build()).collect::<Result<Vec<_>>>()?,
+        false => (0..n).map(|_| one_at_a_time.build()).collect::<Result<Vec<_>>>()?,
     }
     .into_iter();
     let mut stages = vec![

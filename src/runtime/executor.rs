@@ -101,27 +101,46 @@ pub fn run_pipeline<T: Item>(
                         Err(e) => return error.set(e, cancel),
                     };
                     pool.install(|| {
-                        for mut item in rx.iter() {
+                        let batch = stage.batch().max(1);
+                        while let Ok(first) = rx.recv() {
+                            let mut items = vec![first];
+                            while items.len() < batch {
+                                match rx.try_recv() {
+                                    Ok(item) => items.push(item),
+                                    Err(_) => break,
+                                }
+                            }
                             if error.is_set() {
                                 continue; // drain without processing: nothing half-done reaches the sink
                             }
-                            if item.is_rejected() && !stage.handles_rejected() {
+                            let (mut todo, skip): (Vec<T>, Vec<T>) =
+                                items.into_iter().partition(|i| !i.is_rejected() || stage.handles_rejected());
+                            for _ in &skip {
                                 m.add(Duration::ZERO, false);
-                            } else {
-                                let was_rejected = item.is_rejected();
+                            }
+                            if !todo.is_empty() {
+                                let was_rejected: Vec<bool> = todo.iter().map(|i| i.is_rejected()).collect();
                                 let t0 = Instant::now();
-                                let result = stage.process(&mut item);
-                                let elapsed = t0.elapsed();
+                                let result = match todo.as_mut_slice() {
+                                    [one] => stage.process(one),
+                                    many => stage.process_batch(many),
+                                };
+                                // A batch's wall time is shared equally by its items.
+                                let elapsed = t0.elapsed() / todo.len() as u32;
                                 if let Err(e) = result {
-                                    let unit = item.describe();
+                                    let unit = todo.iter().map(|i| i.describe()).collect::<Vec<_>>().join(", ");
                                     error.set(Error::Unit { stage: stage.name().into(), unit, source: Box::new(e) }, cancel);
                                     continue;
                                 }
-                                item.record_timing(stage.name(), elapsed);
-                                m.add(elapsed, item.is_rejected() && !was_rejected);
+                                for (item, was) in todo.iter_mut().zip(was_rejected) {
+                                    item.record_timing(stage.name(), elapsed);
+                                    m.add(elapsed, item.is_rejected() && !was);
+                                }
                             }
-                            if tx.send(item).is_err() {
-                                break;
+                            for item in todo.into_iter().chain(skip) {
+                                if tx.send(item).is_err() {
+                                    return;
+                                }
                             }
                         }
                     })
@@ -211,6 +230,28 @@ mod tests {
             }
         }
     }
+    /// Adds the size of the batch it was handed to each item (so a sunk item shows its batch).
+    struct Batched(usize, std::sync::Arc<Mutex<Vec<usize>>>);
+    impl Stage<Num> for Batched {
+        fn name(&self) -> &'static str {
+            "batched"
+        }
+        fn process(&mut self, item: &mut Num) -> Result<()> {
+            self.process_batch(std::slice::from_mut(item))
+        }
+        fn batch(&self) -> usize {
+            self.0
+        }
+        fn process_batch(&mut self, items: &mut [Num]) -> Result<()> {
+            let n = items.len();
+            self.1.lock().unwrap().push(n);
+            std::thread::sleep(Duration::from_micros(300)); // slower than its producers: items pile up
+            for item in items.iter_mut() {
+                item.v = item.v * 10 + n as u64;
+            }
+            Ok(())
+        }
+    }
     #[derive(Default)]
     struct Collect(Vec<Num>, Option<bool>);
     impl Sink<Num> for Collect {
@@ -248,6 +289,39 @@ mod tests {
         assert_eq!(s.stages[1].rejected, rejected);
         assert_eq!(s.stages[2].items, 1000);
         assert!(sink.0.iter().filter(|n| n.rejected).all(|n| n.trail == ["double", "reject"]));
+    }
+
+    #[test]
+    fn a_batching_stage_gets_waiting_items_together_and_each_item_exactly_once() {
+        // The batching stage is slower than the one in front, so items wait for it; rejected items bypass it.
+        struct Mark;
+        impl Stage<Num> for Mark {
+            fn name(&self) -> &'static str {
+                "mark"
+            }
+            fn process(&mut self, item: &mut Num) -> Result<()> {
+                item.rejected = item.v % 7 == 0;
+                Ok(())
+            }
+        }
+        let sizes = std::sync::Arc::new(Mutex::new(Vec::new()));
+        let mut sink = Collect::default();
+        let stages = vec![
+            StageSpec { workers: vec![Box::new(Mark) as Box<dyn Stage<Num>>, Box::new(Mark)] },
+            StageSpec::single(Batched(4, sizes.clone())),
+        ];
+        run_pipeline(nums(400), stages, &mut sink, 400, false, &CancelToken::new()).unwrap();
+        let sizes = sizes.lock().unwrap().clone();
+        assert!(sizes.iter().all(|&b| (1..=4).contains(&b)), "{sizes:?}");
+        // (A batch of 4 waiting items holds fewer when some of them were rejected.)
+        assert!(sizes.iter().filter(|&&b| b >= 2).count() > sizes.len() / 2, "waiting items were not batched: {sizes:?}");
+        assert_eq!(sizes.iter().sum::<usize>(), (0..400).filter(|v| v % 7 != 0).count());
+        let mut got: Vec<u64> = sink.0.iter().map(|n| if n.rejected { n.v } else { n.v / 10 }).collect();
+        got.sort();
+        assert_eq!(got, (0..400).collect::<Vec<_>>());
+        for n in &sink.0 {
+            assert_eq!(n.trail, if n.rejected { vec!["mark"] } else { vec!["mark", "batched"] });
+        }
     }
 
     #[test]

@@ -33,6 +33,15 @@ pub trait Stage<T: Item>: Send {
     /// Processes one item in place. Rejecting the item is done by marking it (see [`Item::is_rejected`]);
     /// an `Err` is fatal for the whole run (a bug, a full disk, `--strict` on bad input).
     fn process(&mut self, item: &mut T) -> crate::Result<()>;
+    /// How many items the stage takes at once at most (1: one at a time). A worker hands it the items that
+    /// are already waiting, up to this many, and never waits for more.
+    fn batch(&self) -> usize {
+        1
+    }
+    /// Processes several items together (see [`Stage::batch`]); by default one after another.
+    fn process_batch(&mut self, items: &mut [T]) -> crate::Result<()> {
+        items.iter_mut().try_for_each(|item| self.process(item))
+    }
     /// Whether the stage also processes rejected items (the stage that turns items into rows does).
     fn handles_rejected(&self) -> bool {
         false

@@ -24,6 +24,27 @@ impl Stage<PairUnit> for Inpaint {
         unit.target_depth = Some(self.inpainter.inpaint(condition, &unit.known, &ctx));
         Ok(())
     }
+
+    fn batch(&self) -> usize {
+        self.inpainter.batch()
+    }
+
+    fn process_batch(&mut self, units: &mut [PairUnit]) -> Result<()> {
+        let contexts: Vec<InpaintContext> = units
+            .iter()
+            .map(|u| InpaintContext { intrinsics: u.k.expect("ingest sets the intrinsics"), seed: noise_seed(u.seed, 0) })
+            .collect();
+        let views: Vec<_> = units
+            .iter()
+            .zip(&contexts)
+            .map(|(u, ctx)| (u.condition.as_ref().expect("reproject sets the condition"), u.known.as_slice(), ctx))
+            .collect();
+        let filled = self.inpainter.inpaint_batch(&views);
+        for (unit, depth) in units.iter_mut().zip(filled) {
+            unit.target_depth = Some(depth);
+        }
+        Ok(())
+    }
 }
 
 /// The inpainting noise seed of target view `view` (0 = the pair's first view) of a unit: a sub-stream of
