@@ -436,9 +436,9 @@ fn the_shipped_checkpoint_beats_the_handcrafted_filters_on_held_out_scenes() {
             .collect::<Vec<_>>()
             .join("; ")
     );
-    // The target was +10 mIoU points at tau_m 0.5. The shipped tiny network (28 epochs, ~32 min of shared CPU)
-    // reaches +6.4 on 64 held-out maps and less on smaller sets (docs/correction.md), so the target is not
-    // asserted: this checks that it beats the filters, and that it keeps far fewer wrong depths at 0.99.
-    assert!(u05.miou > best_miou, "U-Net mIoU@0.5 {:.4} vs best filter {:.4}", u05.miou, best_miou);
-    assert!(u099.fp_per_map < 0.25 * least_fp, "U-Net FP/map@0.99 {:.1} vs filters {:.1}", u099.fp_per_map, least_fp);
+    // The target is +10 mIoU points at tau_m 0.5. The shipped tiny network reaches +10.5 on the 64 held-out
+    // maps of docs/correction.md and +8.1 on these 32 (docs/correction.md): asserted is a margin it keeps on
+    // both, and far fewer wrong depths kept at 0.99.
+    assert!(u05.miou > best_miou + 0.07, "U-Net mIoU@0.5 {:.4} vs best filter {:.4}", u05.miou, best_miou);
+    assert!(u099.fp_per_map < 0.1 * least_fp, "U-Net FP/map@0.99 {:.1} vs filters {:.1}", u099.fp_per_map, least_fp);
 }
