@@ -1,13 +1,10 @@
 //! Inpaint: fill the unknown target pixels, keeping the known ones bit-exact.
 
-use super::PairUnit;
+use super::{streams, PairUnit};
 use crate::error::Result;
 use crate::inpainting::{InpaintContext, Inpainter};
 use crate::rng::Rng;
 use crate::runtime::Stage;
-
-/// The stream of the unit's generator that stochastic inpainters draw from.
-const NOISE_STREAM: u64 = 0x1a9a_1f00;
 
 pub struct Inpaint {
     pub inpainter: Box<dyn Inpainter>,
@@ -19,10 +16,7 @@ impl Stage<PairUnit> for Inpaint {
     }
 
     fn process(&mut self, unit: &mut PairUnit) -> Result<()> {
-        let condition = unit.condition.as_ref().expect("reproject sets the condition");
-        let ctx = InpaintContext { intrinsics: unit.k.expect("ingest sets the intrinsics"), seed: noise_seed(unit.seed, 0) };
-        unit.target_depth = Some(self.inpainter.inpaint(condition, &unit.known, &ctx));
-        Ok(())
+        self.process_batch(std::slice::from_mut(unit))
     }
 
     fn batch(&self) -> usize {
@@ -50,7 +44,7 @@ impl Stage<PairUnit> for Inpaint {
 /// The inpainting noise seed of target view `view` (0 = the pair's first view) of a unit: a sub-stream of
 /// the unit's seed, apart from the pose sampler's.
 pub fn noise_seed(unit_seed: u64, view: u32) -> u64 {
-    let stream = Rng::new(unit_seed).fork(NOISE_STREAM);
+    let stream = Rng::new(unit_seed).fork(streams::INPAINT);
     match view {
         0 => stream,
         v => stream.fork(v as u64),

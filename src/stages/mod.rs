@@ -22,5 +22,6 @@ pub use unit::PairUnit;
 /// another's.
 pub mod streams {
     pub const POSE: u64 = 1;
-    pub const INPAINT: u64 = 2;
+    /// The inpainting noise (its value predates this list; changing it changes every diffusion-filled pair).
+    pub const INPAINT: u64 = 0x1a9a_1f00;
 }
