@@ -24,3 +24,7 @@ pub use voxel::voxel_downsample;
 
 /// A 3D point in metres.
 pub type Point = nalgebra::Point3<f32>;
+
+/// 1.5·2^52: adding it to an integer-valued f64 `n` with `|n| < 2^51` puts `n` in the low bits of the sum's
+/// mantissa, a float-to-integer conversion that vectorises (z-buffer pixel indices, voxel keys).
+pub(crate) const F64_TO_INT_MAGIC: f64 = 6_755_399_441_055_744.0;

@@ -1,6 +1,6 @@
 //! Z-buffer projection of a point cloud into a camera: the nearest point wins each pixel.
 
-use super::{DepthMap, Intrinsics, Point};
+use super::{DepthMap, Intrinsics, Point, F64_TO_INT_MAGIC};
 use nalgebra::Isometry3;
 use rayon::prelude::*;
 
@@ -23,8 +23,6 @@ pub struct Projection {
 const BLOCK: usize = 64;
 /// Fewest points worth a thread of their own.
 const MIN_POINTS_PER_THREAD: usize = 32_768;
-/// 1.5·2^52: an integer-valued f64 below 2^51 added to it appears in the low bits of the sum's mantissa.
-const MAGIC: f64 = 6_755_399_441_055_744.0;
 /// An empty z-buffer cell: above the bits of every positive finite f32.
 const EMPTY: u32 = u32::MAX;
 
@@ -46,10 +44,10 @@ pub fn project_zbuffer(
     let pixels = lander.pixels;
     // Each thread takes a contiguous run of points and keeps its own per-pixel minimum of z's bits
     // (positive finite f32 compare like their bit patterns); the buffers are merged by minimum, which does
-    // not depend on how the points were split. Equal depths are the same depth, so only the source index needs a tie rule: the lowest
-    // index among the points at the pixel's minimum, found in a second pass when asked for.
-    // Every buffer has one extra cell, `pixels`, where points that miss the image land, so the scatter has
-    // no branch.
+    // not depend on how the points were split. Equal depths are the same depth, so only the source index
+    // needs a tie rule: the lowest index among the points at the pixel's minimum, found in a second pass
+    // when asked for. Every buffer has one extra cell, `pixels`, where points that miss the image land, so
+    // the scatter has no branch.
     let parts = rayon::current_num_threads().clamp(1, points.len().div_ceil(MIN_POINTS_PER_THREAD).max(1));
     let run = points.len().div_ceil(parts).max(1);
     let mut buffers: Vec<Vec<u32>> = points
@@ -177,7 +175,7 @@ impl Lander {
             let v = (yc * self.fy / zc + self.cy).round_ties_even();
             let inside = zf > 0.0 && zf < f32::INFINITY && u >= 0.0 && v >= 0.0 && u < self.w && v < self.h;
             // `v·W + u` is an exact integer below 2^32 when inside; adding 1.5·2^52 puts it in the low bits.
-            let pixel = ((v * self.w + u) + MAGIC).to_bits() as u32;
+            let pixel = ((v * self.w + u) + F64_TO_INT_MAGIC).to_bits() as u32;
             idx[j] = if inside { pixel } else { outside };
             zb[j] = zf.to_bits();
         }

@@ -1,6 +1,6 @@
 //! Voxel-grid downsampling: one point per occupied voxel, the centroid of the points inside it.
 
-use super::Point;
+use super::{Point, F64_TO_INT_MAGIC};
 use rayon::prelude::*;
 
 /// Bits per axis of a packed voxel key; cells in `[-2^20, 2^20)` pack, wider clouds take the slower path.
@@ -69,7 +69,6 @@ unsafe fn pack_keys_avx2(points: &[Point], inv: f64, keys: &mut [u64]) -> bool {
 /// into an integer through the bits of `n + 1.5·2^52` (exact for `|n| < 2^51`).
 #[inline(always)]
 fn pack_keys_body(points: &[Point], inv: f64, keys: &mut [u64]) -> bool {
-    const MAGIC: f64 = 6_755_399_441_055_744.0;
     const LOW: u64 = (1 << AXIS_BITS) - 1;
     let (lo, hi) = (-AXIS_BIAS as f64, AXIS_BIAS as f64);
     let mut fits = true;
@@ -77,7 +76,7 @@ fn pack_keys_body(points: &[Point], inv: f64, keys: &mut [u64]) -> bool {
         let axis = |v: f32| -> (u64, bool) {
             let v = v as f64 * inv;
             let ok = v >= lo && v < hi;
-            let c = v.max(lo).min(hi).floor() + (AXIS_BIAS as f64 + MAGIC);
+            let c = v.max(lo).min(hi).floor() + (AXIS_BIAS as f64 + F64_TO_INT_MAGIC);
             (c.to_bits() & LOW, ok)
         };
         let ((x, ox), (y, oy), (z, oz)) = (axis(p.x), axis(p.y), axis(p.z));
