@@ -152,21 +152,23 @@ fn build_stages(config: &BuildConfig, catalog: Arc<Catalog>, strict: bool, threa
 
 /// The provenance record of the stages: names and parameters (and model hashes when models exist).
 fn stages_json(config: &BuildConfig) -> String {
-    let mut v = serde_json::json!([
-        {"stage": "ingest", "select": config.select, "working": config.working},
-        {"stage": "pose", "sampler": "pivot", "params": config.pose},
-        {"stage": "reproject", "zbuffer": "nearest", "rounding": "half_even"},
-        {"stage": "correct_condition", "params": config.correct.condition, "model_blake3": model_hash(config.correct.condition.checkpoint())},
-        {"stage": "inpaint", "params": config.inpaint, "model_blake3": model_hash(config.inpaint.checkpoint())},
-        {"stage": "correct_output", "params": config.correct.output, "model_blake3": model_hash(config.correct.output.checkpoint())},
-        {"stage": "voxelize", "params": config.voxelize},
-        {"stage": "validate", "params": config.validate},
-    ]);
-    if !config.successive.is_off() {
-        let arr = v.as_array_mut().expect("an array");
-        arr.insert(6, serde_json::json!({"stage": "successive", "params": config.successive}));
-    }
-    v.to_string()
+    let successive = (!config.successive.is_off()).then(|| serde_json::json!({"stage": "successive", "params": config.successive}));
+    let v: Vec<serde_json::Value> = [
+        serde_json::json!({"stage": "ingest", "select": config.select, "working": config.working}),
+        serde_json::json!({"stage": "pose", "sampler": "pivot", "params": config.pose}),
+        serde_json::json!({"stage": "reproject", "zbuffer": "nearest", "rounding": "half_even"}),
+        serde_json::json!({"stage": "correct_condition", "params": config.correct.condition, "model_blake3": model_hash(config.correct.condition.checkpoint())}),
+        serde_json::json!({"stage": "inpaint", "params": config.inpaint, "model_blake3": model_hash(config.inpaint.checkpoint())}),
+        serde_json::json!({"stage": "correct_output", "params": config.correct.output, "model_blake3": model_hash(config.correct.output.checkpoint())}),
+    ]
+    .into_iter()
+    .chain(successive)
+    .chain([
+        serde_json::json!({"stage": "voxelize", "params": config.voxelize}),
+        serde_json::json!({"stage": "validate", "params": config.validate}),
+    ])
+    .collect();
+    serde_json::Value::Array(v).to_string()
 }
 
 /// blake3 of a stage's model file (None without a model; the file was read by validation before).

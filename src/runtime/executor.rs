@@ -121,10 +121,7 @@ pub fn run_pipeline<T: Item>(
                             if !todo.is_empty() {
                                 let was_rejected: Vec<bool> = todo.iter().map(|i| i.is_rejected()).collect();
                                 let t0 = Instant::now();
-                                let result = match todo.as_mut_slice() {
-                                    [one] => stage.process(one),
-                                    many => stage.process_batch(many),
-                                };
+                                let result = stage.process_batch(&mut todo);
                                 // A batch's wall time is shared equally by its items.
                                 let elapsed = t0.elapsed() / todo.len() as u32;
                                 if let Err(e) = result {

@@ -39,14 +39,16 @@ impl Stage<PairUnit> for Successive {
         let first = unit.target_depth.as_ref().expect("inpaint sets the target");
         // The fragment (all views, source frame) and the scene memory (source points + views so far). The
         // unit's own memory stays the source cloud.
-        let first_points = self.view_points(first, &k, &t_first);
-        let mut memory = voxel_downsample(&[unit.memory.as_slice(), &first_points].concat(), self.memory_voxel);
-        let mut fragment = first_points;
+        let mut fragment = self.view_points(first, &k, &t_first);
+        let mut memory = voxel_downsample(&[unit.memory.as_slice(), &fragment].concat(), self.memory_voxel);
         for view in 1..self.views {
             let t = self.sampler.sample(&mut Rng::new(unit.seed).fork(streams::POSE).fork(view as u64));
             let depth = self.generate(&memory, &t, &k, noise_seed(unit.seed, view));
             let points = self.view_points(&depth, &k, &t);
-            memory = voxel_downsample(&[memory.as_slice(), &points].concat(), self.memory_voxel);
+            if view + 1 < self.views {
+                // The last view feeds no other: its points only join the fragment.
+                memory = voxel_downsample(&[memory.as_slice(), &points].concat(), self.memory_voxel);
+            }
             fragment.extend(points);
         }
         // The fused target, in the first view's camera, cropped like a single view's cloud.
