@@ -3,8 +3,8 @@
 //!
 //! 1. The diffusion denoiser, paper preset (≈ 38.4 M parameters), one forward at 256×256, batch 4.
 //! 2. The correction network, paper preset with DepthAugment (≈ 34.1 M), one forward at 256×256, batch 1.
-//! 3. Ours only: the tiny presets' forwards (batch 1) and the tiny diffusion inpainter at 25 DDIM steps
-//!    (seconds per pair).
+//! 3. Ours only: the tiny presets' forwards (batch 1), the tiny diffusion inpainter at 25 DDIM steps
+//!    and the fill of `pipelines/demo-networks.toml` at its own settings (seconds per pair).
 //!
 //! Both sides run under no-grad with the same libtorch intra-op thread count (`THREADS`, or
 //! `POINTREGGPT_BENCH_THREADS`). The Rust side times ours, writes each network's variables with
@@ -449,6 +449,9 @@ struct TinyRun {
     /// Seconds per pair of `ddnm_sample` at `DDIM_STEPS`, batch 1.
     ddim_s: f64,
     known_fraction: f64,
+    /// Seconds per pair of the `[inpaint]` of `pipelines/demo-networks.toml` (push–pull and sampling), or
+    /// why it could not run.
+    demo_fill: std::result::Result<(f64, String), String>,
 }
 
 fn model_path(name: &str) -> PathBuf {
@@ -517,6 +520,8 @@ fn run_tiny() -> TinyRun {
     let problem = [Problem { y: &y, known: &known, intrinsics: [311.0, 312.0, 128.5, 128.0], seed: 3, init: None }];
     let (ddim_ms, _) =
         median_ms(1, DDIM_REPS, || ddnm_sample(&denoiser, &schedule, &opts, n, n, &problem, Device::Cpu));
+    let metres: Vec<f32> = d.iter().map(|v| v * 10.0).collect();
+    let demo_fill = demo_fill_seconds(metres, &known);
     TinyRun {
         denoiser_ms,
         denoiser_b4_ms,
@@ -527,7 +532,33 @@ fn run_tiny() -> TinyRun {
         correction_weights,
         ddim_s: ddim_ms / 1e3,
         known_fraction: known.iter().filter(|k| **k).count() as f64 / known.len() as f64,
+        demo_fill,
     }
+}
+
+/// Seconds per pair of the demo-networks fill on one view, and its settings.
+fn demo_fill_seconds(depth: Vec<f32>, known: &[bool]) -> std::result::Result<(f64, String), String> {
+    use pointreggpt::geometry::{DepthMap, Intrinsics};
+    use pointreggpt::inpainting::{InpaintConfig, InpaintContext};
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    std::env::set_current_dir(root).map_err(|e| e.to_string())?;
+    let name = "pipelines/demo-networks.toml";
+    let text = std::fs::read_to_string(root.join(name)).map_err(|e| format!("{name}: {e}"))?;
+    let config = pointreggpt::pipeline::BuildConfig::from_toml(&text, name).map_err(|e| e.to_string())?;
+    config.validate().map_err(|e| e.to_string())?;
+    let desc = match &config.inpaint {
+        InpaintConfig::Diffusion(c) => format!(
+            "{}, {} steps from {:?} at step {}, eta {}",
+            c.checkpoint, c.steps, c.start, c.start_step, c.eta
+        ),
+        other => format!("{other:?}"),
+    };
+    let inpainter = config.inpaint.build().map_err(|e| e.to_string())?;
+    let n = SIZE as u32;
+    let map = DepthMap::new(n, n, depth).map_err(|e| e.to_string())?;
+    let ctx = InpaintContext { intrinsics: Intrinsics::new(311.0, 312.0, 128.5, 128.0, n, n).map_err(|e| e.to_string())?, seed: 3 };
+    let (ms, _) = median_ms(1, DDIM_REPS, || inpainter.inpaint(&map, known, &ctx));
+    Ok((ms / 1e3, desc))
 }
 
 // ------------------------------------------------------------------------------------------------
@@ -642,6 +673,13 @@ fn print_tiny(t: &TinyRun, denoiser: &PaperRun) {
         t.ddim_s * 1e3 / DDIM_STEPS as f64,
         100.0 * t.known_fraction
     );
+    match &t.demo_fill {
+        Ok((secs, desc)) => println!(
+            "{:<44} {:>10}  {:>10.2} s  {desc} (per pair, median of {DDIM_REPS} after 1 warm-up)",
+            "demo-networks.toml fill", t.denoiser_params, secs
+        ),
+        Err(e) => println!("{:<44} {:>10}  {:>12}  {e}", "demo-networks.toml fill", "-", "n/a"),
+    }
     let per_image_s = denoiser.ms / DENOISER_BATCH as f64 / 1e3;
     println!(
         "Derived, not measured: the paper denoiser at {OFFICIAL_STEPS} DDIM steps would take ~{:.0} s per pair on this CPU \

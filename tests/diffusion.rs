@@ -7,6 +7,7 @@ mod support;
 use pointreggpt::diffusion::checkpoint::{export_ema, load_denoiser, save, sorted_variables, DiffusionMeta, EMA, FORMAT};
 use pointreggpt::diffusion::data::{to_network, FrameSet, TrainFrame};
 use pointreggpt::diffusion::train::{batch_loss, train_diffusion, DiffusionTrainOptions, Weighting, LATEST};
+use pointreggpt::diffusion::sampler::Resample;
 use pointreggpt::diffusion::{ddnm_sample, Problem, SamplerOptions, Schedule};
 use pointreggpt::geometry::{DepthMap, Intrinsics};
 use pointreggpt::inpainting::{DiffusionInpaintConfig, DiffusionInpainter, InpaintContext, Inpainter, Start};
@@ -55,7 +56,7 @@ fn known_pixels_are_bit_identical_and_the_seed_fixes_the_rest() {
     let (w, h) = (30, 22); // not a multiple of 8: the sampler pads
     let (y1, m1) = problem_data(w, h, 0.6, 1);
     let (y2, m2) = problem_data(w, h, 0.3, 2);
-    let opts = SamplerOptions { steps: 4, eta: 1.0, start_step: None };
+    let opts = SamplerOptions { steps: 4, eta: 1.0, start_step: None, resample: None };
     let both = ddnm_sample(&net, &s, &opts, w, h, &[p(&y1, &m1, 5), p(&y2, &m2, 6)], Device::Cpu);
     for (out, (y, m)) in both.iter().zip([(&y1, &m1), (&y2, &m2)]) {
         assert_eq!(out.len(), w * h);
@@ -77,9 +78,19 @@ fn known_pixels_are_bit_identical_and_the_seed_fixes_the_rest() {
     let init: Vec<f32> = y1.iter().zip(&m1).map(|(v, k)| if *k { *v } else { to_network(2.0) }).collect();
     let mut from_init = p(&y1, &m1, 5);
     from_init.init = Some(&init);
-    let started = ddnm_sample(&net, &s, &SamplerOptions { steps: 3, eta: 1.0, start_step: Some(200) }, w, h, &[from_init], Device::Cpu);
+    let started = ddnm_sample(&net, &s, &SamplerOptions { steps: 3, eta: 1.0, start_step: Some(200), resample: None }, w, h, &[from_init], Device::Cpu);
     assert!((0..w * h).all(|i| !m1[i] || started[0][i].to_bits() == y1[i].to_bits()));
     assert_ne!(started[0], alone[0]);
+    // RePaint-style resampling, deterministic η 0 (its re-noising is the only randomness): known pixels
+    // exact, the seed fixes the output, and the extra passes change it.
+    let det = SamplerOptions { steps: 4, eta: 0.0, start_step: None, resample: None };
+    let resampled = SamplerOptions { resample: Some(Resample { jump: 1, repeats: 3 }), ..det };
+    let r1 = ddnm_sample(&net, &s, &resampled, w, h, &[p(&y1, &m1, 5)], Device::Cpu);
+    let r2 = ddnm_sample(&net, &s, &resampled, w, h, &[p(&y1, &m1, 5)], Device::Cpu);
+    assert_eq!(r1, r2);
+    assert!((0..w * h).all(|i| !m1[i] || r1[0][i].to_bits() == y1[i].to_bits()));
+    let plain = ddnm_sample(&net, &s, &det, w, h, &[p(&y1, &m1, 5)], Device::Cpu);
+    assert!((0..w * h).filter(|&i| !m1[i] && r1[0][i] != plain[0][i]).count() > (w * h) / 4);
     let other = ddnm_sample(&net, &s, &opts, w, h, &[p(&y1, &m1, 7)], Device::Cpu);
     let unknown_diff = (0..w * h).filter(|&i| !m1[i] && other[0][i] != alone[0][i]).count();
     assert!(unknown_diff > (w * h) / 4, "another seed changed only {unknown_diff} pixels");
@@ -92,7 +103,7 @@ fn p<'a>(y: &'a [f32], known: &'a [bool], seed: u64) -> Problem<'a> {
 #[test]
 fn the_inpainter_keeps_metric_depths_exactly_and_fills_the_holes() {
     let (vs, net) = tiny(3);
-    let inpainter = DiffusionInpainter::new(vs, net, SamplerOptions { steps: 3, eta: 1.0, start_step: None });
+    let inpainter = DiffusionInpainter::new(vs, net, SamplerOptions { steps: 3, eta: 1.0, start_step: None, resample: None });
     let (w, h) = (32u32, 24u32);
     let mut r = Rng::new(9);
     let data: Vec<f32> = (0..w * h).map(|_| r.uniform_range(0.6, 4.0) as f32).collect();
@@ -116,7 +127,7 @@ fn a_view_gives_the_same_result_whichever_views_share_its_batch() {
     // Batch 4: five views go as [d e a b] + [c, padding]; three as [a b c, padding]; one as [a, padding].
     // Every forward pass has 4 views, so each view's output is bit-identical across groupings.
     let (vs, net) = tiny(5);
-    let inpainter = DiffusionInpainter::new(vs, net, SamplerOptions { steps: 3, eta: 1.0, start_step: None }).with_batch(4);
+    let inpainter = DiffusionInpainter::new(vs, net, SamplerOptions { steps: 3, eta: 1.0, start_step: None, resample: None }).with_batch(4);
     let (w, h) = (64u32, 48u32);
     let k = Intrinsics::new(60.0, 60.0, 32.0, 24.0, w, h).unwrap();
     let views: Vec<(DepthMap, Vec<bool>, InpaintContext)> = (0..5u64)
@@ -236,6 +247,41 @@ fn training_lowers_the_loss_and_resume_equals_an_uninterrupted_run() {
     let (ya, yb) = tch::no_grad(|| (full.forward(&x, &t, &k), exported.forward(&x, &t, &k)));
     assert!(ya.equal(&yb));
     assert!(std::fs::metadata(&small).unwrap().len() * 3 < std::fs::metadata(a.path().join(LATEST)).unwrap().len() + 1);
+
+    // Fine-tuning (--init) starts from the file's sampling (EMA) weights at step 0 with a fresh optimiser:
+    // one step with no EMA update leaves the EMA exactly the source's, while the online network moved.
+    let f = tempfile::tempdir().unwrap();
+    let mut tune = opts(f.path(), 1);
+    tune.init = Some(small.clone());
+    tune.ema_every = 1000;
+    tune.max_t = Some(30);
+    let report = train_diffusion(&data, &tune, |_| {}).unwrap();
+    assert_eq!(report.first_step, 1);
+    let tf: BTreeMap<String, Tensor> = Tensor::read_safetensors(f.path().join(LATEST)).unwrap().into_iter().collect();
+    let source_ema: Vec<&(String, Tensor)> = ta.iter().filter(|(k, _)| k.starts_with(EMA)).collect();
+    assert!(source_ema.len() > 50);
+    for (k, t) in &source_ema {
+        assert!(t.equal(&tf[k]), "EMA tensor {k} is not the initial checkpoint's");
+        let online = k.replacen(EMA, "model.", 1);
+        assert!(tf.contains_key(&online));
+    }
+    assert!(source_ema.iter().any(|(k, t)| !t.equal(&tf[&k.replacen(EMA, "model.", 1)])), "the online network trained");
+    // A network trained only below step 30 samples only from a push-pull start below it.
+    let tuned = ModelPath::new(f.path().join(LATEST).to_str().unwrap());
+    let config = |start, start_step| DiffusionInpaintConfig { checkpoint: tuned, steps: 3, eta: 1.0, start, start_step, batch: 1, resample: None };
+    assert!(config(Start::PushPull, 29).validate("inpaint").is_ok());
+    for (start, step) in [(Start::PushPull, 30), (Start::Noise, 10)] {
+        let err = config(start, step).validate("inpaint").unwrap_err().to_string();
+        assert!(err.contains("below 30"), "{err}");
+    }
+    assert!(DiffusionInpaintConfig { checkpoint: ModelPath::new(small.to_str().unwrap()), ..config(Start::Noise, 500) }.validate("inpaint").is_ok());
+    // A file that is not a denoiser checkpoint, or a time-step cap outside 1..=1000, is refused.
+    let mut bad = opts(tempfile::tempdir().unwrap().path(), 1);
+    bad.init = Some(f.path().join("loss.jsonl"));
+    assert!(train_diffusion(&data, &bad, |_| {}).is_err());
+    let mut bad = opts(tempfile::tempdir().unwrap().path(), 1);
+    bad.max_t = Some(0);
+    assert!(train_diffusion(&data, &bad, |_| {}).unwrap_err().to_string().contains("--max-t"));
 }
 
 #[test]
@@ -399,9 +445,9 @@ fn a_torchscript_denoiser_samples_like_the_native_one() {
         let module = tch::CModule::create_by_tracing("Denoiser", "forward", &inputs, &mut trace).unwrap();
         module.save(&path).unwrap();
     }
-    let sampler = SamplerOptions { steps: 3, eta: 1.0, start_step: None };
+    let sampler = SamplerOptions { steps: 3, eta: 1.0, start_step: None, resample: None };
     let native = DiffusionInpainter::new(vs, net, sampler);
-    let config = DiffusionInpaintConfig { checkpoint: ModelPath::new(path.to_str().unwrap()), steps: 3, eta: 1.0, start: Start::Noise, start_step: 500, batch: 1 };
+    let config = DiffusionInpaintConfig { checkpoint: ModelPath::new(path.to_str().unwrap()), steps: 3, eta: 1.0, start: Start::Noise, start_step: 500, batch: 1, resample: None };
     config.validate("inpaint").unwrap();
     let scripted = DiffusionInpainter::load(&config, Device::Cpu).unwrap();
     let (w, h) = (32u32, 24u32);
@@ -425,7 +471,7 @@ fn a_torchscript_denoiser_samples_like_the_native_one() {
     }
     // A file that is neither safetensors nor TorchScript is refused with its name.
     std::fs::write(&path, b"PK\x03\x04 broken").unwrap();
-    let err = DiffusionInpaintConfig { checkpoint: ModelPath::new(path.to_str().unwrap()), steps: 3, eta: 1.0, start: Start::Noise, start_step: 500, batch: 1 }.validate("inpaint").unwrap_err();
+    let err = DiffusionInpaintConfig { checkpoint: ModelPath::new(path.to_str().unwrap()), steps: 3, eta: 1.0, start: Start::Noise, start_step: 500, batch: 1, resample: None }.validate("inpaint").unwrap_err();
     assert!(err.to_string().contains("denoiser.pt"), "{err}");
 }
 

@@ -26,7 +26,7 @@ pub enum EvalWhat {
 #[command(
     after_help = "For each selected frame j of each sequence: the frame's points (official working resolution, depth range and \
 crop box) are z-buffered into the stored camera of frame j+GAP, corrected (none, min-pool 3.75 cm, the correction U-Net at \
-tau_m 0.99), filled (none, push-pull, diffusion from pure noise as the authors, diffusion started from the noised push-pull fill) and compared with the depth captured at j+GAP, where valid. Kept pixels: \
+tau_m 0.99), filled (none, push-pull, diffusion from pure noise as the authors, except for a network trained with --max-t; diffusion started from the noised push-pull fill) and compared with the depth captured at j+GAP, where valid. Kept pixels: \
 kept per map, wrong = more than 5 cm behind the captured surface (penetration) per map, AbsRel. Filled pixels (unknown after \
 correction, captured valid): coverage, AbsRel, RMSE, delta<1.25. The output correction of the build is not applied."
 )]
@@ -54,6 +54,15 @@ pub struct EvalInpaintArgs {
     /// The step the `push_pull`-started diffusion rows are noised to (the official rows start from pure noise).
     #[arg(long, default_value_t = 500)]
     pub start_step: usize,
+    /// RePaint-style resampling of the diffusion fill: blocks of this many DDIM steps (0: off) ...
+    #[arg(long, default_value_t = 0)]
+    pub resample_jump: usize,
+    /// ... each run this many times, re-noised back to the block's start in between.
+    #[arg(long, default_value_t = 1)]
+    pub resample_repeats: usize,
+    /// DDIM eta of the diffusion fill (official 1: fresh noise at every step; 0: deterministic).
+    #[arg(long, default_value_t = 1.0)]
+    pub eta: f64,
     /// Correction U-Net checkpoint (tau_m 0.99).
     #[arg(long, default_value = "models/correction-tiny.safetensors")]
     pub correction: PathBuf,
@@ -150,6 +159,7 @@ fn run_correction(a: &EvalCorrectionArgs, out: &mut dyn Write) -> Result<()> {
 fn run_inpaint(a: &EvalInpaintArgs, out: &mut dyn Write) -> Result<()> {
     use crate::correction::CorrectionConfig;
     use crate::diffusion::evaluate::{evaluate, format_table, make_view, to_csv, NamedCorrector, NamedFill};
+    use crate::diffusion::sampler::Resample;
     use crate::inpainting::{DiffusionInpaintConfig, InpaintConfig, Start};
     use crate::nn::ModelPath;
     use crate::pipeline::config::WorkingConfig;
@@ -186,14 +196,20 @@ fn run_inpaint(a: &EvalInpaintArgs, out: &mut dyn Write) -> Result<()> {
         NamedFill { name: "none".into(), inpainter: InpaintConfig::None.build()? },
         NamedFill { name: "push_pull".into(), inpainter: InpaintConfig::PushPull.build()? },
     ];
+    // A network trained only on the nearly clean steps (`train diffusion --max-t`) has no pure-noise row.
+    let low_steps_only = crate::diffusion::checkpoint::read_meta(&a.diffusion).ok().and_then(|m| m.trained_below_step()).is_some();
     for (start, name) in [(Start::Noise, format!("diffusion{}", a.steps)), (Start::PushPull, format!("diff{}/pp{}", a.steps, a.start_step))] {
+        if start == Start::Noise && low_steps_only {
+            continue;
+        }
         let diffusion = InpaintConfig::Diffusion(DiffusionInpaintConfig {
             checkpoint: ModelPath::new(&a.diffusion.display().to_string()),
             steps: a.steps,
-            eta: 1.0,
+            eta: a.eta,
             start,
             start_step: a.start_step,
             batch: 1,
+            resample: (a.resample_jump > 0).then_some(Resample { jump: a.resample_jump, repeats: a.resample_repeats }),
         });
         diffusion.validate("--diffusion")?;
         fills.push(NamedFill { name, inpainter: diffusion.build()? });

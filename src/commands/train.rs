@@ -57,6 +57,10 @@ pub struct TrainDiffusionArgs {
     /// Loss weight per time step.
     #[arg(long, value_enum)]
     pub weighting: Option<crate::diffusion::train::Weighting>,
+    /// Train only on time steps 0..MAX_T (default: all 1000). A model for the push-pull-started sampler
+    /// (`[inpaint] start = "push_pull"`, `start_step` below MAX_T), which never sees larger steps.
+    #[arg(long)]
+    pub max_t: Option<usize>,
     /// No horizontal flips.
     #[arg(long)]
     pub no_flip: bool,
@@ -78,6 +82,10 @@ pub struct TrainDiffusionArgs {
     /// Continue from <out>/latest.safetensors (weights, EMA, Adam moments, step).
     #[arg(long)]
     pub resume: bool,
+    /// Fine-tune: start from this checkpoint's weights (its EMA network when it has one; same preset)
+    /// with a fresh optimiser, EMA warm-up and step count. Ignored when --resume finds a checkpoint.
+    #[arg(long)]
+    pub init: Option<PathBuf>,
     /// cpu, cuda or cuda:N.
     #[arg(long, default_value = "cpu")]
     pub device: String,
@@ -268,11 +276,13 @@ fn run_diffusion(a: &TrainDiffusionArgs, out: &mut dyn Write) -> Result<()> {
         opts.crop = (c > 0).then_some(c);
     }
     opts.weighting = a.weighting.unwrap_or(opts.weighting);
+    opts.max_t = a.max_t.or(opts.max_t);
     opts.hflip = !a.no_flip;
     opts.checkpoint_every = a.checkpoint_every.unwrap_or(opts.checkpoint_every);
     opts.previews = !a.no_previews;
     opts.seed = a.seed;
     opts.resume = a.resume;
+    opts.init = a.init.clone();
     opts.device = crate::nn::parse_device(&a.device)?;
     opts.progress = !a.quiet;
     let data = FrameSet::load(&a.data, opts.progress)?;

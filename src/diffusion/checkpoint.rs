@@ -36,6 +36,14 @@ pub struct DiffusionMeta {
     pub info: serde_json::Value,
 }
 
+impl DiffusionMeta {
+    /// The time-step cap the network was trained under (`train diffusion --max-t`, recorded with the
+    /// training options), if any: such a network only knows the steps below it.
+    pub fn trained_below_step(&self) -> Option<usize> {
+        self.info.get("options")?.get("max_t")?.as_u64().map(|t| t as usize)
+    }
+}
+
 /// Named tensors in a fixed (sorted) order.
 pub type Named = Vec<(String, Tensor)>;
 

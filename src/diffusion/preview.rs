@@ -24,7 +24,7 @@ pub fn write_preview(model: &dyn X0Model, schedule: &Schedule, size: usize, intr
     let known = vec![false; size * size];
     let problems: Vec<Problem<'_>> =
         (0..SAMPLES as u64).map(|i| Problem { y: &y, known: &known, intrinsics, seed: seed ^ (i + 1), init: None }).collect();
-    let opts = SamplerOptions { steps: STEPS, eta: 1.0, start_step: None };
+    let opts = SamplerOptions { steps: STEPS, eta: 1.0, start_step: None, resample: None };
     let samples = ddnm_sample(model, schedule, &opts, size, size, &problems, device);
     let mut canvas = Canvas::new((SAMPLES * (size + 2) - 2) as u32, size as u32, [0, 0, 0]);
     for (i, s) in samples.iter().enumerate() {

@@ -11,6 +11,9 @@
 //! initial estimate, `x_s = √ᾱ_s·x_init + √(1 − ᾱ_s)·z` (SDEdit-style), where `x_init` is the known pixels
 //! and a classical fill elsewhere: the coarse depth then comes from the known neighbourhood and the
 //! model adds what it learned at the finer noise levels.
+//!
+//! Also optional: RePaint-style resampling ([`Resample`]), which runs each block of steps several times,
+//! re-noising the state back to the block's first step in between.
 
 use super::schedule::Schedule;
 use super::model::X0Model;
@@ -29,11 +32,55 @@ pub struct SamplerOptions {
     /// Start at this step from each problem's noised `init` instead of pure noise at T − 1 (None:
     /// official).
     pub start_step: Option<usize>,
+    /// RePaint-style resampling (None: official).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub resample: Option<Resample>,
 }
 
 impl SamplerOptions {
     /// The official sampler: 250 steps, η = 1, from pure noise.
-    pub const OFFICIAL: SamplerOptions = SamplerOptions { steps: 250, eta: 1.0, start_step: None };
+    pub const OFFICIAL: SamplerOptions = SamplerOptions { steps: 250, eta: 1.0, start_step: None, resample: None };
+}
+
+/// RePaint-style resampling (Lugmayr et al. 2022; not in the official sampler): the DDIM chain runs in
+/// blocks of `jump` steps, and after a block the state is re-noised back to the block's first step and
+/// the block runs again, `repeats` times in all. The known pixels are imposed at every step, so the
+/// filled region gets several passes to agree with them. The last step (to −1) is never repeated.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Resample {
+    pub jump: usize,
+    pub repeats: usize,
+}
+
+/// One move of the sampling chain.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Move {
+    /// A DDIM step from `t` down to `t_next` (−1: the end of the chain).
+    Down(i64, i64),
+    /// Forward diffusion of the state from step `from` up to step `to`:
+    /// `x_to = √(ᾱ_to/ᾱ_from)·x_from + √(1 − ᾱ_to/ᾱ_from)·z`.
+    Up(i64, i64),
+}
+
+/// The moves of a chain over DDIM `pairs` (ending at −1), with `resample` blocks when given.
+pub fn chain(pairs: &[(i64, i64)], resample: Option<Resample>) -> Vec<Move> {
+    let down = |&(t, n): &(i64, i64)| Move::Down(t, n);
+    let Some(r) = resample.filter(|r| r.jump > 0 && r.repeats > 1) else {
+        return pairs.iter().map(down).collect();
+    };
+    let (body, last) = pairs.split_at(pairs.len().saturating_sub(1));
+    let mut moves = Vec::new();
+    for block in body.chunks(r.jump) {
+        for rep in 0..r.repeats {
+            if rep > 0 {
+                moves.push(Move::Up(block[block.len() - 1].1, block[0].0));
+            }
+            moves.extend(block.iter().map(down));
+        }
+    }
+    moves.extend(last.iter().map(down));
+    moves
 }
 
 /// One inpainting problem at the network's resolution.
@@ -110,7 +157,15 @@ pub fn ddnm_sample(
             }
         };
         let mut x0 = y.shallow_clone();
-        for (t, t_next) in pairs {
+        for mv in chain(&pairs, opts.resample) {
+            let (t, t_next) = match mv {
+                Move::Down(t, t_next) => (t, t_next),
+                Move::Up(from, to) => {
+                    let ratio = schedule.alpha_bar(to) / schedule.alpha_bar(from);
+                    x = x * ratio.sqrt() + noise(&mut rngs) * (1.0 - ratio).sqrt();
+                    continue;
+                }
+            };
             let time = Tensor::full([b as i64], t, (Kind::Int64, device));
             let pred = net.predict_x0(&x, &time, &k).clamp(-1.0, 1.0);
             let ab = schedule.alpha_bar(t);
@@ -139,4 +194,26 @@ pub fn ddnm_sample(
             v
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn resampling_repeats_each_block_after_renoising_it_and_never_the_last_step() {
+        let pairs = [(20, 15), (15, 10), (10, 5), (5, -1)];
+        let plain: Vec<Move> = pairs.iter().map(|&(t, n)| Move::Down(t, n)).collect();
+        assert_eq!(chain(&pairs, None), plain);
+        assert_eq!(chain(&pairs, Some(Resample { jump: 2, repeats: 1 })), plain);
+        use Move::{Down, Up};
+        assert_eq!(
+            chain(&pairs, Some(Resample { jump: 2, repeats: 2 })),
+            vec![Down(20, 15), Down(15, 10), Up(10, 20), Down(20, 15), Down(15, 10), Down(10, 5), Up(5, 10), Down(10, 5), Down(5, -1)]
+        );
+        let three = chain(&pairs, Some(Resample { jump: 3, repeats: 3 }));
+        assert_eq!(three.iter().filter(|m| matches!(m, Up(..))).count(), 2);
+        assert_eq!(three.len(), 3 * 3 + 2 + 1);
+        assert_eq!(three.last(), Some(&Down(5, -1)));
+    }
 }

@@ -48,6 +48,9 @@ pub struct DiffusionTrainOptions {
     /// Gradient-norm clip (official 1).
     pub clip: f64,
     pub weighting: Weighting,
+    /// Train only on time steps below this (None: all T). For a model that only ever samples from a
+    /// start step below it (`start = "push_pull"`): its whole capacity goes to the nearly clean steps.
+    pub max_t: Option<usize>,
     /// EMA decay cap, update interval and warm-up (official 0.995, 10, 100).
     pub ema_beta: f64,
     pub ema_every: u64,
@@ -62,6 +65,10 @@ pub struct DiffusionTrainOptions {
     pub previews: bool,
     pub out: PathBuf,
     pub resume: bool,
+    /// Start from this checkpoint's sampling weights (EMA when present) instead of a random
+    /// initialisation: a fine-tuning run (fresh Adam and EMA warm-up, step 0). `resume` wins when
+    /// `out` already holds a checkpoint.
+    pub init: Option<PathBuf>,
     #[serde(skip)]
     pub device: Device,
     pub progress: bool,
@@ -81,6 +88,7 @@ impl DiffusionTrainOptions {
             betas: (0.9, 0.99),
             clip: 1.0,
             weighting: if tiny { Weighting::MinSnr } else { Weighting::Snr },
+            max_t: None,
             ema_beta: 0.995,
             ema_every: 10,
             ema_after: 100,
@@ -91,6 +99,7 @@ impl DiffusionTrainOptions {
             previews: true,
             out,
             resume: false,
+            init: None,
             device: Device::Cpu,
             progress: false,
         }
@@ -109,6 +118,9 @@ impl DiffusionTrainOptions {
         let (cw, ch) = self.crop.map_or((w, h), |c| (c, c));
         if cw == 0 || cw % m != 0 || ch % m != 0 || cw > w || ch > h {
             return bad("--crop", format!("must be a multiple of {m} no larger than the frames ({w}x{h})"));
+        }
+        if self.max_t.is_some_and(|t| t == 0 || t > Schedule::official().len()) {
+            return bad("--max-t", format!("must be in 1..={}", Schedule::official().len()));
         }
         Ok(())
     }
@@ -296,6 +308,16 @@ pub fn train_diffusion(data: &FrameSet, opts: &DiffusionTrainOptions, mut on_rep
             checkpoint::copy_into(&latest, &checkpoint::group(&tensors, prefix), vars, what)?;
         }
         start = meta.step;
+    } else if let Some(init) = &opts.init {
+        let meta = checkpoint::read_meta(init)?;
+        if meta.net != config {
+            return Err(Error::config("--init", format!("{} holds another network ({:?})", init.display(), meta.net.preset)));
+        }
+        let tensors = checkpoint::read_tensors(init)?;
+        let prefix = if tensors.keys().any(|k| k.starts_with(EMA)) { EMA } else { ONLINE };
+        let weights = checkpoint::group(&tensors, prefix);
+        checkpoint::copy_into(init, &weights, &online, "initial")?;
+        checkpoint::copy_into(init, &weights, &ema, "initial")?;
     }
     let save = |step: u64, loss: f64, adam: &Adam| {
         let meta = DiffusionMeta {
@@ -318,7 +340,8 @@ pub fn train_diffusion(data: &FrameSet, opts: &DiffusionTrainOptions, mut on_rep
         let mut step_loss = 0.0;
         for _ in 0..opts.grad_accum {
             let (x0, k) = make_batch(data, opts, &mut rng);
-            let t: Vec<i64> = (0..opts.batch).map(|_| rng.below(schedule.len() as u64) as i64).collect();
+            let t_end = opts.max_t.unwrap_or(schedule.len()) as u64;
+            let t: Vec<i64> = (0..opts.batch).map(|_| rng.below(t_end) as i64).collect();
             let loss = batch_loss(&net, &schedule, opts.weighting, &x0, &k, &t) / opts.grad_accum as f64;
             loss.backward();
             step_loss += loss.double_value(&[]);

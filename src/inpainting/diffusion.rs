@@ -3,7 +3,7 @@
 
 use super::{InpaintContext, Inpainter, PushPull};
 use crate::diffusion::data::{from_network, to_network};
-use crate::diffusion::sampler::{ddnm_sample, Problem, SamplerOptions};
+use crate::diffusion::sampler::{ddnm_sample, Problem, Resample, SamplerOptions};
 use crate::diffusion::schedule::Schedule;
 use crate::diffusion::model::{is_torchscript, load_model, NativeModel, X0Model};
 use crate::error::{Error, Result};
@@ -39,6 +39,10 @@ pub struct DiffusionInpaintConfig {
     /// results differ from another batch size by float rounding (~1e-6), hence part of the config.
     #[serde(default = "one", skip_serializing_if = "is_one")]
     pub batch: usize,
+    /// RePaint-style resampling, `{ jump = J, repeats = R }`: every block of J DDIM steps runs R times,
+    /// re-noised back to its first step in between (not in the official sampler; docs/diffusion.md).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub resample: Option<Resample>,
 }
 
 fn one() -> usize {
@@ -79,21 +83,35 @@ impl DiffusionInpaintConfig {
         if self.start_step > 999 {
             return Err(Error::config(field, "start_step must be in 0..=999"));
         }
+        if self.resample.is_some_and(|r| r.jump == 0 || r.repeats == 0 || r.repeats > 100) {
+            return Err(Error::config(field, "resample needs jump >= 1 and repeats in 1..=100"));
+        }
         if self.batch == 0 || self.batch > 256 {
             return Err(Error::config(field, "batch must be in 1..=256"));
         }
         let path = self.checkpoint.as_path();
         let checked = match is_torchscript(path) {
-            Ok(true) => load_model(path, Device::Cpu).map(|_| ()),
-            Ok(false) => crate::diffusion::checkpoint::read_meta(path).map(|_| ()),
+            Ok(true) => load_model(path, Device::Cpu).map(|_| None),
+            Ok(false) => crate::diffusion::checkpoint::read_meta(path).map(|m| m.trained_below_step()),
             Err(e) => Err(e),
         };
-        checked.map_err(|e| Error::config(field, format!("checkpoint `{}`: {e}", self.checkpoint)))
+        let trained_below = checked.map_err(|e| Error::config(field, format!("checkpoint `{}`: {e}", self.checkpoint)))?;
+        match (trained_below, self.sampler().start_step) {
+            (Some(cap), start) if start.is_none_or(|s| s >= cap) => Err(Error::config(
+                field,
+                format!(
+                    "checkpoint `{}` was trained only on time steps below {cap} (--max-t): sample it with \
+                     start = \"push_pull\" and start_step < {cap}",
+                    self.checkpoint
+                ),
+            )),
+            _ => Ok(()),
+        }
     }
 
     pub fn sampler(&self) -> SamplerOptions {
         let start_step = (self.start == Start::PushPull).then_some(self.start_step);
-        SamplerOptions { steps: self.steps, eta: self.eta, start_step }
+        SamplerOptions { steps: self.steps, eta: self.eta, start_step, resample: self.resample }
     }
 }
 
