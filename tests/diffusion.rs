@@ -415,6 +415,41 @@ fn eval_inpaint_on_real_frames_scores_every_method() {
     assert!(get("min_pool", "none", 4) <= get("none", "none", 4));
 }
 
+/// `eval inpaint` on 4 held-out redkitchen views with the U-Net correction: (push-pull, diffusion) filled-pixel
+/// (AbsRel, delta < 1.25) for a checkpoint refining push-pull from step 5 in 5 deterministic steps.
+fn refine_scores(real: &Path, checkpoint: &str, dir: &Path) -> ((f64, f64), (f64, f64)) {
+    let csv = dir.join(format!("{}.csv", checkpoint.replace('/', "_")));
+    let o = support::bin()
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .args(["eval", "inpaint"])
+        .arg(real.join("7scenes-redkitchen"))
+        .args(["--gap", "10", "--first", "300", "--every", "20", "--max-views", "4", "--quiet"])
+        .args(["--steps", "5", "--start-step", "5", "--eta", "0", "--diffusion", checkpoint])
+        .arg("--out")
+        .arg(&csv)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let row = |fill: &str| -> (f64, f64) {
+        let r: Vec<&str> = text.lines().find(|l| l.starts_with(&format!("unet@0.99,{fill},"))).unwrap_or_else(|| panic!("{text}")).split(',').collect();
+        (r[7].parse().unwrap(), r[9].parse().unwrap())
+    };
+    (row("push_pull"), row("diff5/pp5"))
+}
+
+#[test]
+fn the_shipped_refine_model_fills_unseen_real_views_close_to_push_pull_and_far_better_than_the_all_steps_model() {
+    let Some(real) = support::real_data() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let (pp, refine) = refine_scores(&real, "models/diffusion-tiny-refine.safetensors", dir.path());
+    let (_, all_steps) = refine_scores(&real, "models/diffusion-tiny.safetensors", dir.path());
+    // docs/diffusion.md, 18 views: push-pull 0.049, refine 0.053, the all-steps model from step 20 0.165.
+    assert!(refine.0 < 1.2 * pp.0, "refine AbsRel {} vs push-pull {}", refine.0, pp.0);
+    assert!(refine.1 > pp.1 - 0.01, "refine delta {} vs push-pull {}", refine.1, pp.1);
+    assert!(all_steps.0 > 2.0 * refine.0, "all-steps AbsRel {} vs refine {}", all_steps.0, refine.0);
+}
+
 #[test]
 fn frames_load_from_a_sequence_folder_in_network_space() {
     let Some(real) = support::real_data() else { return };
