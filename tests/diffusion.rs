@@ -373,25 +373,29 @@ fn build_twice_and_compare(config: &BuildConfig, dir: &Path) {
     assert_eq!(digests[0], digests[1], "1 and 2 threads give different pairs");
 }
 
+/// Runs `eval inpaint` from the repository root on redkitchen, source frames 300, 320, ... 10 frames
+/// before their targets, with `args` added; returns the CSV it wrote to `csv`.
+fn eval_inpaint(real: &Path, csv: &Path, args: &[&str]) -> String {
+    let o = support::bin()
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .args(["eval", "inpaint"])
+        .arg(real.join("7scenes-redkitchen"))
+        .args(["--gap", "10", "--first", "300", "--every", "20", "--quiet"])
+        .args(args)
+        .arg("--out")
+        .arg(csv)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    std::fs::read_to_string(csv).unwrap()
+}
+
 #[test]
 fn eval_inpaint_on_real_frames_scores_every_method() {
     let Some(real) = support::real_data() else { return };
     let dir = tempfile::tempdir().unwrap();
     let ckpt = save_untrained(dir.path(), 8);
-    let csv = dir.path().join("eval.csv");
-    let o = support::bin()
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .args(["eval", "inpaint"])
-        .arg(real.join("7scenes-redkitchen"))
-        .args(["--gap", "10", "--first", "300", "--every", "20", "--max-views", "3", "--steps", "2", "--quiet"])
-        .arg("--diffusion")
-        .arg(&ckpt)
-        .arg("--out")
-        .arg(&csv)
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let text = std::fs::read_to_string(&csv).unwrap();
+    let text = eval_inpaint(&real, &dir.path().join("eval.csv"), &["--max-views", "3", "--steps", "2", "--diffusion", ckpt.to_str().unwrap()]);
     let rows: Vec<Vec<String>> = text.lines().skip(1).map(|l| l.split(',').map(String::from).collect()).collect();
     assert_eq!(rows.len(), 12, "{text}");
     let get = |c: &str, f: &str, col: usize| -> f64 {
@@ -419,18 +423,8 @@ fn eval_inpaint_on_real_frames_scores_every_method() {
 /// (AbsRel, delta < 1.25) for a checkpoint refining push-pull from step 5 in 5 deterministic steps.
 fn refine_scores(real: &Path, checkpoint: &str, dir: &Path) -> ((f64, f64), (f64, f64)) {
     let csv = dir.join(format!("{}.csv", checkpoint.replace('/', "_")));
-    let o = support::bin()
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .args(["eval", "inpaint"])
-        .arg(real.join("7scenes-redkitchen"))
-        .args(["--gap", "10", "--first", "300", "--every", "20", "--max-views", "4", "--quiet"])
-        .args(["--steps", "5", "--start-step", "5", "--eta", "0", "--diffusion", checkpoint])
-        .arg("--out")
-        .arg(&csv)
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let text = std::fs::read_to_string(&csv).unwrap();
+    let args = ["--max-views", "4", "--steps", "5", "--start-step", "5", "--eta", "0", "--diffusion", checkpoint];
+    let text = eval_inpaint(real, &csv, &args);
     let row = |fill: &str| -> (f64, f64) {
         let r: Vec<&str> = text.lines().find(|l| l.starts_with(&format!("unet@0.99,{fill},"))).unwrap_or_else(|| panic!("{text}")).split(',').collect();
         (r[7].parse().unwrap(), r[9].parse().unwrap())

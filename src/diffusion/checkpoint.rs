@@ -160,14 +160,21 @@ pub fn copy_into(path: &Path, group: &HashMap<String, Tensor>, vars: &[(String, 
     })
 }
 
-/// Loads the network sampling uses (EMA weights when present) onto `device`.
-pub fn load_denoiser(path: &Path, device: Device) -> Result<(nn::VarStore, Denoiser, DiffusionMeta)> {
+/// The configuration and the weights sampling uses (EMA when present, else the first of
+/// [`LOAD_PREFIXES`] the file has), their prefix stripped.
+pub fn read_sampling_weights(path: &Path) -> Result<(DiffusionMeta, HashMap<String, Tensor>)> {
     let (header, shapes) = read_header(path)?;
     let meta = meta_from_header(path, &header, &shapes)?;
     let prefix = network_prefix(path, &shapes)?;
+    Ok((meta, group(&read_tensors(path)?, prefix)))
+}
+
+/// Loads the network sampling uses (EMA weights when present) onto `device`.
+pub fn load_denoiser(path: &Path, device: Device) -> Result<(nn::VarStore, Denoiser, DiffusionMeta)> {
+    let (meta, weights) = read_sampling_weights(path)?;
     let mut vs = nn::VarStore::new(Device::Cpu);
     let net = Denoiser::new(&vs.root(), &meta.net)?;
-    copy_into(path, &group(&read_tensors(path)?, prefix), &sorted_variables(&vs), "denoiser")?;
+    copy_into(path, &weights, &sorted_variables(&vs), "denoiser")?;
     if device != Device::Cpu {
         vs.set_device(device);
     }

@@ -309,13 +309,10 @@ pub fn train_diffusion(data: &FrameSet, opts: &DiffusionTrainOptions, mut on_rep
         }
         start = meta.step;
     } else if let Some(init) = &opts.init {
-        let meta = checkpoint::read_meta(init)?;
+        let (meta, weights) = checkpoint::read_sampling_weights(init)?;
         if meta.net != config {
             return Err(Error::config("--init", format!("{} holds another network ({:?})", init.display(), meta.net.preset)));
         }
-        let tensors = checkpoint::read_tensors(init)?;
-        let prefix = if tensors.keys().any(|k| k.starts_with(EMA)) { EMA } else { ONLINE };
-        let weights = checkpoint::group(&tensors, prefix);
         checkpoint::copy_into(init, &weights, &online, "initial")?;
         checkpoint::copy_into(init, &weights, &ema, "initial")?;
     }
@@ -334,13 +331,13 @@ pub fn train_diffusion(data: &FrameSet, opts: &DiffusionTrainOptions, mut on_rep
     bar.set_position(start);
     let t0 = std::time::Instant::now();
     let (mut sum, mut count, mut last_loss) = (0f64, 0u64, f64::NAN);
+    let t_end = opts.max_t.unwrap_or(schedule.len()) as u64;
     for step in start + 1..=opts.steps {
         let mut rng = Rng::new(opts.seed).fork(step);
         tch::manual_seed((opts.seed ^ step.wrapping_mul(0x9E37_79B9_7F4A_7C15)) as i64);
         let mut step_loss = 0.0;
         for _ in 0..opts.grad_accum {
             let (x0, k) = make_batch(data, opts, &mut rng);
-            let t_end = opts.max_t.unwrap_or(schedule.len()) as u64;
             let t: Vec<i64> = (0..opts.batch).map(|_| rng.below(t_end) as i64).collect();
             let loss = batch_loss(&net, &schedule, opts.weighting, &x0, &k, &t) / opts.grad_accum as f64;
             loss.backward();
