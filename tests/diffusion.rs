@@ -6,7 +6,8 @@ mod support;
 
 use pointreggpt::diffusion::checkpoint::{export_ema, load_denoiser, save, sorted_variables, DiffusionMeta, EMA, FORMAT};
 use pointreggpt::diffusion::data::{to_network, FrameSet, TrainFrame};
-use pointreggpt::diffusion::train::{batch_loss, train_diffusion, DiffusionTrainOptions, Weighting, LATEST};
+use pointreggpt::diffusion::holes::holed_frame;
+use pointreggpt::diffusion::train::{batch_loss, train_diffusion, DiffusionTrainOptions, Holes, Weighting, LATEST};
 use pointreggpt::diffusion::sampler::Resample;
 use pointreggpt::diffusion::{ddnm_sample, Problem, SamplerOptions, Schedule};
 use pointreggpt::geometry::{DepthMap, Intrinsics};
@@ -19,6 +20,7 @@ use pointreggpt::rng::Rng;
 use pointreggpt::runtime::CancelToken;
 use pointreggpt::shards::dataset::Dataset;
 use pointreggpt::sources::depth_png::decode_depth_png;
+use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 use std::collections::BTreeMap;
 use std::path::Path;
 use tch::{nn, Device, Kind, Tensor};
@@ -181,7 +183,7 @@ fn fixed_loss(net: &Denoiser, data: &FrameSet) -> f64 {
     let k: Vec<f32> = data.frames[..n].iter().flat_map(|f| f.intrinsics.map(|v| v as f32)).collect();
     let k = Tensor::from_slice(&k).view([n as i64, 4]);
     let t: Vec<i64> = (0..n as i64).map(|i| 20 + 110 * i).collect();
-    tch::no_grad(|| batch_loss(net, &s, Weighting::MinSnr, &x0, &k, &t).double_value(&[]))
+    tch::no_grad(|| batch_loss(net, &s, Weighting::MinSnr, &x0, &k, &t, None).double_value(&[]))
 }
 
 #[test]
@@ -282,6 +284,65 @@ fn training_lowers_the_loss_and_resume_equals_an_uninterrupted_run() {
     let mut bad = opts(tempfile::tempdir().unwrap().path(), 1);
     bad.max_t = Some(0);
     assert!(train_diffusion(&data, &bad, |_| {}).unwrap_err().to_string().contains("--max-t"));
+}
+
+/// The hole-aware loss of `net` on fixed draws: each frame holed by a fixed sideways round trip.
+fn fixed_hole_loss(net: &Denoiser, data: &FrameSet, hole_weight: f32) -> f64 {
+    let s = Schedule::official();
+    tch::manual_seed(99);
+    let n = data.len().min(8);
+    let (w, h) = (data.width, data.height);
+    let motion = Isometry3::from_parts(Translation3::new(-0.3, 0.05, 0.0), UnitQuaternion::from_euler_angles(0.02, 0.08, 0.0));
+    let (mut x, mut start, mut weight) = (Vec::new(), Vec::new(), Vec::new());
+    for f in &data.frames[..n] {
+        let holed = holed_frame(&f.depth, w, h, f.intrinsics, &motion);
+        x.extend_from_slice(&f.depth);
+        start.extend_from_slice(&holed.start);
+        weight.extend(f.depth.iter().zip(&holed.holes).map(|(v, hole)| if *v <= -1.0 { 0.0 } else if *hole { hole_weight } else { 1.0 }));
+    }
+    let image = |v: &[f32]| Tensor::from_slice(v).view([n as i64, 1, h as i64, w as i64]);
+    let k: Vec<f32> = data.frames[..n].iter().flat_map(|f| f.intrinsics.map(|v| v as f32)).collect();
+    let k = Tensor::from_slice(&k).view([n as i64, 4]);
+    let t: Vec<i64> = (0..n as i64).map(|i| 2 * i).collect();
+    let holes = Holes { start: image(&start), weight: image(&weight) };
+    tch::no_grad(|| batch_loss(net, &s, Weighting::MinSnr, &image(&x), &k, &t, Some(&holes)).double_value(&[]))
+}
+
+#[test]
+fn hole_aware_training_lowers_the_loss_on_push_pull_filled_round_trip_holes() {
+    let data = small_frames();
+    let (_v, net) = tiny(5);
+    // With the clean frame as the start and unit weights on every pixel, the hole-aware loss is the plain
+    // one (same noise); a push-pull start with holes is a different input.
+    let s = Schedule::official();
+    let n = 4;
+    let x: Vec<f32> = data.frames[..n].iter().flat_map(|f| f.depth.clone()).collect();
+    let x0 = Tensor::from_slice(&x).view([n as i64, 1, 64, 64]);
+    let k = Tensor::from_slice(&[30f32, 30.0, 32.0, 32.0].repeat(n)).view([n as i64, 4]);
+    let t = [0i64, 3, 7, 15];
+    let loss = |holes: Option<&Holes>| {
+        tch::manual_seed(3);
+        tch::no_grad(|| batch_loss(&net, &s, Weighting::MinSnr, &x0, &k, &t, holes).double_value(&[]))
+    };
+    let same = Holes { start: x0.copy(), weight: x0.ones_like() };
+    assert!((loss(None) - loss(Some(&same))).abs() < 1e-6 * loss(None), "{} vs {}", loss(None), loss(Some(&same)));
+    let before = fixed_hole_loss(&net, &data, 4.0);
+    assert!((before - fixed_hole_loss(&net, &data, 1.0)).abs() > 1e-6, "hole weight has no effect");
+
+    // 60 hole-aware steps (from the same initial network) lower the hole-aware loss on fixed draws.
+    let dir = tempfile::tempdir().unwrap();
+    let mut o = opts(dir.path(), 60);
+    o.checkpoint_every = 60;
+    o.holes = true;
+    o.max_t = Some(20);
+    train_diffusion(&data, &o, |_| {}).unwrap();
+    let (_v1, trained, meta) = load_denoiser(&dir.path().join(LATEST), Device::Cpu).unwrap();
+    assert_eq!(meta.info["options"]["holes"], true);
+    let after = fixed_hole_loss(&trained, &data, 4.0);
+    assert!(after < 0.7 * before, "hole-aware loss {before} -> {after}");
+    let mut bad = opts(tempfile::tempdir().unwrap().path(), 1);
+    bad.hole_weight = 0.0;
+    assert!(train_diffusion(&data, &bad, |_| {}).unwrap_err().to_string().contains("--hole-weight"));
 }
 
 #[test]

@@ -61,6 +61,15 @@ pub struct TrainDiffusionArgs {
     /// (`[inpaint] start = "push_pull"`, `start_step` below MAX_T), which never sees larger steps.
     #[arg(long)]
     pub max_t: Option<usize>,
+    /// Hole-aware training, for the push-pull-started sampler (with --max-t): each frame gets the holes a
+    /// camera move opens (a round trip through a camera drawn from the build's pivot sampler, its motion
+    /// scaled by U(0.1, 1)), filled by push-pull, and is noised from that fill; the loss counts only
+    /// pixels with true depth, the holes --hole-weight times as much.
+    #[arg(long)]
+    pub holes: bool,
+    /// Loss weight of hole pixels relative to the others, with --holes.
+    #[arg(long)]
+    pub hole_weight: Option<f64>,
     /// No horizontal flips.
     #[arg(long)]
     pub no_flip: bool,
@@ -277,6 +286,8 @@ fn run_diffusion(a: &TrainDiffusionArgs, out: &mut dyn Write) -> Result<()> {
     }
     opts.weighting = a.weighting.unwrap_or(opts.weighting);
     opts.max_t = a.max_t.or(opts.max_t);
+    opts.holes = a.holes;
+    opts.hole_weight = a.hole_weight.unwrap_or(opts.hole_weight);
     opts.hflip = !a.no_flip;
     opts.checkpoint_every = a.checkpoint_every.unwrap_or(opts.checkpoint_every);
     opts.previews = !a.no_previews;

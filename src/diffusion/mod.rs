@@ -6,6 +6,7 @@
 pub mod checkpoint;
 pub mod data;
 pub mod evaluate;
+pub mod holes;
 pub mod model;
 pub mod preview;
 pub mod sampler;

@@ -10,6 +10,7 @@ use super::checkpoint::{self, sorted_variables, DiffusionMeta, Named, EMA, ONLIN
 use super::data::FrameSet;
 use super::schedule::Schedule;
 use crate::error::{Error, Result};
+use crate::geometry::PivotPoseSampler;
 use crate::nn::denoiser::{Denoiser, DenoiserConfig};
 use crate::nn::unet::{parameter_count, Preset};
 use crate::rng::Rng;
@@ -51,6 +52,12 @@ pub struct DiffusionTrainOptions {
     /// Train only on time steps below this (None: all T). For a model that only ever samples from a
     /// start step below it (`start = "push_pull"`): its whole capacity goes to the nearly clean steps.
     pub max_t: Option<usize>,
+    /// Hole-aware training (see [`super::holes`]): each frame gets the holes of a camera round trip,
+    /// filled by push–pull, and is noised from that fill instead of from the clean frame; the loss counts
+    /// only pixels with true depth, holes `hole_weight` times as much as the rest. For a model sampled
+    /// from `start = "push_pull"` at a small start step (with `max_t`).
+    pub holes: bool,
+    pub hole_weight: f64,
     /// EMA decay cap, update interval and warm-up (official 0.995, 10, 100).
     pub ema_beta: f64,
     pub ema_every: u64,
@@ -89,6 +96,8 @@ impl DiffusionTrainOptions {
             clip: 1.0,
             weighting: if tiny { Weighting::MinSnr } else { Weighting::Snr },
             max_t: None,
+            holes: false,
+            hole_weight: 4.0,
             ema_beta: 0.995,
             ema_every: 10,
             ema_after: 100,
@@ -121,6 +130,9 @@ impl DiffusionTrainOptions {
         }
         if self.max_t.is_some_and(|t| t == 0 || t > Schedule::official().len()) {
             return bad("--max-t", format!("must be in 1..={}", Schedule::official().len()));
+        }
+        if !(self.hole_weight > 0.0 && self.hole_weight.is_finite()) {
+            return bad("--hole-weight", format!("must be positive, got {}", self.hole_weight));
         }
         Ok(())
     }
@@ -208,21 +220,33 @@ fn preview_view(data: &FrameSet, opts: &DiffusionTrainOptions) -> (usize, [f64; 
     (size, [fx, fy, cx - left as f64, cy - top as f64])
 }
 
-/// One batch: clean frames `[B, 1, S, S]` and intrinsics `[B, 4]`.
-fn make_batch(data: &FrameSet, opts: &DiffusionTrainOptions, rng: &mut Rng) -> (Tensor, Tensor) {
+/// One batch: clean frames `[B, 1, S, S]` and intrinsics `[B, 4]`; with `opts.holes`, also the holed
+/// starts and per-pixel loss weights, both `[B, 1, S, S]`.
+fn make_batch(data: &FrameSet, opts: &DiffusionTrainOptions, rng: &mut Rng) -> (Tensor, Tensor, Option<Holes>) {
     let (w, h) = (data.width, data.height);
     let (cw, ch) = opts.crop.map_or((w, h), |c| (c, c));
     let b = opts.batch;
     let mut x = vec![0f32; b * cw * ch];
     let mut k = vec![0f32; b * 4];
+    let (mut start, mut weight) = (Vec::new(), Vec::new());
     for i in 0..b {
         let f = &data.frames[rng.below(data.len() as u64) as usize];
         let (x0, y0) = (rng.below((w - cw + 1) as u64) as usize, rng.below((h - ch + 1) as u64) as usize);
         let flip = opts.hflip && rng.uniform() < 0.5;
+        let holed = opts.holes.then(|| {
+            let motion = super::holes::sample_motion(&PivotPoseSampler::default(), rng);
+            super::holes::holed_frame(&f.depth, w, h, f.intrinsics, &motion)
+        });
         for r in 0..ch {
             for c in 0..cw {
                 let sc = if flip { x0 + cw - 1 - c } else { x0 + c };
-                x[i * cw * ch + r * cw + c] = f.depth[(y0 + r) * w + sc];
+                let (src, dst) = ((y0 + r) * w + sc, i * cw * ch + r * cw + c);
+                x[dst] = f.depth[src];
+                if let Some(holed) = &holed {
+                    start.push(holed.start[src]);
+                    let truth = f.depth[src] > -1.0;
+                    weight.push(if !truth { 0.0 } else if holed.holes[src] { opts.hole_weight as f32 } else { 1.0 });
+                }
             }
         }
         let [fx, fy, cx, cy] = f.intrinsics;
@@ -231,13 +255,23 @@ fn make_batch(data: &FrameSet, opts: &DiffusionTrainOptions, rng: &mut Rng) -> (
         let cx = if flip { (cw - 1) as f64 - cx } else { cx };
         k[i * 4..i * 4 + 4].copy_from_slice(&[fx as f32, fy as f32, cx as f32, (cy - y0 as f64) as f32]);
     }
-    let x = Tensor::from_slice(&x).view([b as i64, 1, ch as i64, cw as i64]).to_device(opts.device);
+    let image = |v: &[f32]| Tensor::from_slice(v).view([b as i64, 1, ch as i64, cw as i64]).to_device(opts.device);
+    let holes = opts.holes.then(|| Holes { start: image(&start), weight: image(&weight) });
     let k = Tensor::from_slice(&k).view([b as i64, 4]).to_device(opts.device);
-    (x, k)
+    (image(&x), k, holes)
 }
 
-/// The loss of one batch (mean over the batch of the weighted per-frame mean |x̂0 − x0|).
-pub fn batch_loss(net: &Denoiser, schedule: &Schedule, weighting: Weighting, x0: &Tensor, k: &Tensor, t: &[i64]) -> Tensor {
+/// The hole-aware part of a batch (`DiffusionTrainOptions::holes`).
+pub struct Holes {
+    /// What is noised instead of the clean frame: known depths with push–pull in the holes.
+    pub start: Tensor,
+    /// Per-pixel loss weight: 0 without true depth, `hole_weight` in holes, 1 elsewhere.
+    pub weight: Tensor,
+}
+
+/// The loss of one batch: the mean over the batch of the time-step weight times the per-frame mean
+/// |x̂0 − x0| (with `holes`: x_t noised from the holed start, and the pixel-weighted mean).
+pub fn batch_loss(net: &Denoiser, schedule: &Schedule, weighting: Weighting, x0: &Tensor, k: &Tensor, t: &[i64], holes: Option<&Holes>) -> Tensor {
     let device = x0.device();
     let b = t.len() as i64;
     let ab: Vec<f32> = t.iter().map(|&t| schedule.alpha_bar(t) as f32).collect();
@@ -253,9 +287,15 @@ pub fn batch_loss(net: &Denoiser, schedule: &Schedule, weighting: Weighting, x0:
         .collect();
     let ab = Tensor::from_slice(&ab).view([b, 1, 1, 1]).to_device(device);
     let noise = x0.randn_like();
-    let xt = x0 * ab.sqrt() + noise * (ab.ones_like() - &ab).sqrt();
+    let clean = holes.map_or(x0, |h| &h.start);
+    let xt = clean * ab.sqrt() + noise * (ab.ones_like() - &ab).sqrt();
     let pred = net.forward(&xt, &Tensor::from_slice(t).to_device(device), k);
-    let per_frame = (pred - x0).abs().mean_dim(&[1i64, 2, 3][..], false, Kind::Float);
+    let dims = &[1i64, 2, 3][..];
+    let per_frame = match holes {
+        None => (pred - x0).abs().mean_dim(dims, false, Kind::Float),
+        Some(h) => ((pred - x0).abs() * &h.weight).sum_dim_intlist(dims, false, Kind::Float)
+            / h.weight.sum_dim_intlist(dims, false, Kind::Float).clamp_min(1.0),
+    };
     (per_frame * Tensor::from_slice(&w).to_device(device)).mean(Kind::Float)
 }
 
@@ -337,9 +377,9 @@ pub fn train_diffusion(data: &FrameSet, opts: &DiffusionTrainOptions, mut on_rep
         tch::manual_seed((opts.seed ^ step.wrapping_mul(0x9E37_79B9_7F4A_7C15)) as i64);
         let mut step_loss = 0.0;
         for _ in 0..opts.grad_accum {
-            let (x0, k) = make_batch(data, opts, &mut rng);
+            let (x0, k, holes) = make_batch(data, opts, &mut rng);
             let t: Vec<i64> = (0..opts.batch).map(|_| rng.below(t_end) as i64).collect();
-            let loss = batch_loss(&net, &schedule, opts.weighting, &x0, &k, &t) / opts.grad_accum as f64;
+            let loss = batch_loss(&net, &schedule, opts.weighting, &x0, &k, &t, holes.as_ref()) / opts.grad_accum as f64;
             loss.backward();
             step_loss += loss.double_value(&[]);
         }
