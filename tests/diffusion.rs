@@ -6,6 +6,7 @@ mod support;
 
 use pointreggpt::diffusion::checkpoint::{export_ema, load_denoiser, save, sorted_variables, DiffusionMeta, EMA, FORMAT};
 use pointreggpt::diffusion::data::{to_network, FrameSet, TrainFrame};
+use pointreggpt::correction::NoCorrection;
 use pointreggpt::diffusion::holes::holed_frame;
 use pointreggpt::diffusion::train::{batch_loss, train_diffusion, DiffusionTrainOptions, Holes, Weighting, LATEST};
 use pointreggpt::diffusion::sampler::Resample;
@@ -295,7 +296,7 @@ fn fixed_hole_loss(net: &Denoiser, data: &FrameSet, hole_weight: f32) -> f64 {
     let motion = Isometry3::from_parts(Translation3::new(-0.3, 0.05, 0.0), UnitQuaternion::from_euler_angles(0.02, 0.08, 0.0));
     let (mut x, mut start, mut weight) = (Vec::new(), Vec::new(), Vec::new());
     for f in &data.frames[..n] {
-        let holed = holed_frame(&f.depth, w, h, f.intrinsics, &motion);
+        let holed = holed_frame(&f.depth, w, h, f.intrinsics, &motion, &NoCorrection);
         x.extend_from_slice(&f.depth);
         start.extend_from_slice(&holed.start);
         weight.extend(f.depth.iter().zip(&holed.holes).map(|(v, hole)| if *v <= -1.0 { 0.0 } else if *hole { hole_weight } else { 1.0 }));

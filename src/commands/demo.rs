@@ -43,7 +43,7 @@ pub fn run(args: &DemoArgs, out: &mut dyn Write) -> Result<()> {
     let t_target_from_source = PivotPoseSampler::default().sample(&mut rng);
     let proj = project_zbuffer(&source_points, &t_target_from_source, &k, false);
     let (mut condition, mut known) = (proj.depth.clone(), proj.known.clone());
-    let corrector = CorrectionConfig::MinPool { threshold: 0.0375 }.build();
+    let corrector = CorrectionConfig::OFFICIAL_MIN_POOL.build();
     let keep = corrector.keep_mask(&condition);
     let dropped_condition = apply_keep_mask(&mut condition, &mut known, &keep);
     let mut target_depth = InpaintConfig::PushPull.build()?.inpaint(&condition, &known, &InpaintContext { intrinsics: k, seed: 0 });

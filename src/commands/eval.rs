@@ -187,7 +187,7 @@ fn run_inpaint(a: &EvalInpaintArgs, out: &mut dyn Write) -> Result<()> {
     }
     let mut corrections = vec![
         NamedCorrector { name: "none".into(), corrector: CorrectionConfig::None.build() },
-        NamedCorrector { name: "min_pool".into(), corrector: CorrectionConfig::MinPool { threshold: 0.0375 }.build() },
+        NamedCorrector { name: "min_pool".into(), corrector: CorrectionConfig::OFFICIAL_MIN_POOL.build() },
     ];
     let unet = CorrectionConfig::Unet { checkpoint: ModelPath::new(&a.correction.display().to_string()), threshold: 0.99, preset: None };
     unet.validate("--correction")?;

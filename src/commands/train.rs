@@ -63,13 +63,18 @@ pub struct TrainDiffusionArgs {
     pub max_t: Option<usize>,
     /// Hole-aware training, for the push-pull-started sampler (with --max-t): each frame gets the holes a
     /// camera move opens (a round trip through a camera drawn from the build's pivot sampler, its motion
-    /// scaled by U(0.1, 1)), filled by push-pull, and is noised from that fill; the loss counts only
+    /// scaled by U(0.1, 1)) and a correction (see --holes-correction), filled by push-pull, and is noised from that fill; the loss counts only
     /// pixels with true depth, the holes --hole-weight times as much.
     #[arg(long)]
     pub holes: bool,
     /// Loss weight of hole pixels relative to the others, with --holes.
     #[arg(long)]
     pub hole_weight: Option<f64>,
+    /// With --holes: a correction U-Net checkpoint whose drops are part of the holes. Each holed frame goes
+    /// through one of: no correction, the official min-pool filter and, with this, the U-Net at tau_m 0.5
+    /// and 0.99 (the thresholds of pipelines/demo.toml and paper-3dmatch.toml), drawn uniformly.
+    #[arg(long)]
+    pub holes_correction: Option<PathBuf>,
     /// No horizontal flips.
     #[arg(long)]
     pub no_flip: bool,
@@ -288,6 +293,15 @@ fn run_diffusion(a: &TrainDiffusionArgs, out: &mut dyn Write) -> Result<()> {
     opts.max_t = a.max_t.or(opts.max_t);
     opts.holes = a.holes;
     opts.hole_weight = a.hole_weight.unwrap_or(opts.hole_weight);
+    if a.holes_correction.is_some() && !a.holes || a.hole_weight.is_some() && !a.holes {
+        return Err(Error::config("--holes-correction/--hole-weight", "only apply with --holes"));
+    }
+    if let Some(path) = &a.holes_correction {
+        let checkpoint = crate::nn::ModelPath::new(&path.display().to_string());
+        for threshold in crate::diffusion::holes::UNET_THRESHOLDS {
+            opts.hole_corrections.push(crate::correction::CorrectionConfig::Unet { checkpoint, threshold, preset: None });
+        }
+    }
     opts.hflip = !a.no_flip;
     opts.checkpoint_every = a.checkpoint_every.unwrap_or(opts.checkpoint_every);
     opts.previews = !a.no_previews;

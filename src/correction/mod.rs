@@ -59,6 +59,9 @@ pub enum CorrectionConfig {
 }
 
 impl CorrectionConfig {
+    /// The official hand-crafted filter: min-pool at 3.75 cm (reference §3.3).
+    pub const OFFICIAL_MIN_POOL: CorrectionConfig = CorrectionConfig::MinPool { threshold: 0.0375 };
+
     /// The model file this method reads, if any.
     pub fn checkpoint(&self) -> Option<crate::nn::ModelPath> {
         match self {

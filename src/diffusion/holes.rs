@@ -6,9 +6,11 @@
 //! its points are projected into a camera moved by a (scaled) draw of the build's pivot sampler and back,
 //! so the pixels the moved camera could not see — disocclusions, the strip outside its frustum, the
 //! cracks of forward projection — are unknown, exactly as in a re-projected view, and the rest keep the
-//! round trip's depth. Push–pull fills the unknown pixels as the sampler's start does.
+//! round trip's depth. A corrector then drops pixels as the build's `[correct.condition]` does, and
+//! push–pull fills the unknown pixels as the sampler's start does.
 
 use super::data::{from_network, to_network};
+use crate::correction::{apply_keep_mask, Corrector};
 use crate::geometry::{backproject, project_zbuffer, DepthMap, DepthRange, Intrinsics, PivotPoseSampler};
 use crate::inpainting::{InpaintContext, Inpainter, PushPull};
 use crate::nn::correction::DEPTH_SCALE_M;
@@ -49,6 +51,10 @@ pub fn sample_motion(sampler: &PivotPoseSampler, rng: &mut Rng) -> Isometry3<f64
 /// Range of the motion scale of [`sample_motion`].
 pub const MOTION_SCALE: (f64, f64) = (0.1, 1.0);
 
+/// The keep thresholds (τ_m) of the correction U-Net among the corrections of hole-aware training
+/// (`train diffusion --holes-correction`): the demo's and the official one.
+pub const UNET_THRESHOLDS: [f32; 2] = [0.5, 0.99];
+
 /// One holed training frame in network space: the sampler's start (the round trip's known depths with
 /// push–pull in the holes) and the holes (pixels the round trip left unknown).
 pub struct HoledFrame {
@@ -57,19 +63,30 @@ pub struct HoledFrame {
 }
 
 /// Opens holes in a network-space frame (row-major `width`×`height`, intrinsics `[fx, fy, cx, cy]`) by a
-/// round trip through `t_moved_from_camera`, and fills them as the sampler's push–pull start does.
-pub fn holed_frame(frame: &[f32], width: usize, height: usize, intrinsics: [f64; 4], t_moved_from_camera: &Isometry3<f64>) -> HoledFrame {
+/// round trip through `t_moved_from_camera` and `correct`, and fills them as the sampler's push–pull
+/// start does.
+pub fn holed_frame(
+    frame: &[f32],
+    width: usize,
+    height: usize,
+    intrinsics: [f64; 4],
+    t_moved_from_camera: &Isometry3<f64>,
+    correct: &dyn Corrector,
+) -> HoledFrame {
     let [fx, fy, cx, cy] = intrinsics;
     let k = Intrinsics::new(fx, fy, cx, cy, width as u32, height as u32).expect("training intrinsics are valid");
     let depth = DepthMap::new(width as u32, height as u32, frame.iter().map(|v| from_network(*v)).collect()).expect("frame size");
-    let trip = round_trip(&depth, &k, t_moved_from_camera);
-    let filled = PushPull.inpaint(&trip.depth, &trip.known, &InpaintContext { intrinsics: k, seed: 0 });
-    HoledFrame { start: filled.data().iter().map(|z| to_network(*z)).collect(), holes: trip.known.iter().map(|k| !k).collect() }
+    let RoundTrip { mut depth, mut known } = round_trip(&depth, &k, t_moved_from_camera);
+    let keep = correct.keep_mask(&depth);
+    apply_keep_mask(&mut depth, &mut known, &keep);
+    let filled = PushPull.inpaint(&depth, &known, &InpaintContext { intrinsics: k, seed: 0 });
+    HoledFrame { start: filled.data().iter().map(|z| to_network(*z)).collect(), holes: known.iter().map(|k| !k).collect() }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::correction::{CorrectionConfig, NoCorrection};
     use nalgebra::{Translation3, UnitQuaternion};
 
     const W: u32 = 64;
@@ -115,7 +132,7 @@ mod tests {
         let data: Vec<f32> = (0..w * w).map(|i| if (20..44).contains(&(i % w)) && (20..44).contains(&(i / w)) { near } else { wall }).collect();
         let frame: Vec<f32> = data.iter().map(|z| to_network(*z)).collect();
         let t = Isometry3::from_parts(Translation3::new(-0.1, 0.0, 0.0), UnitQuaternion::identity());
-        let holed = holed_frame(&frame, w, w, k().as_vector(), &t);
+        let holed = holed_frame(&frame, w, w, k().as_vector(), &t, &NoCorrection);
         // Moving 0.1 m to +x shifts the box 5 px left and the wall 1.7 px: the wall just left of the box,
         // columns 17..20 of rows inside the box (column c lands at round(c − 1.67), the box at 15..=38),
         // is behind the box from the moved camera; column 16 lands at 14, beside it.
@@ -134,6 +151,21 @@ mod tests {
                 assert!((z - data[i]).abs() < 1e-3, "known pixel {i}: {z}");
             }
         }
+    }
+
+    #[test]
+    fn the_corrector_drops_pixels_into_the_holes() {
+        // A wall with one pixel 20 cm behind it (a penetration, as a re-projection can leave): the official
+        // min-pool filter drops it, so it is a hole; without correction it is not.
+        let w = W as usize;
+        let mut data = vec![to_network(2.0); w * w];
+        data[32 * w + 32] = to_network(2.2);
+        let none = holed_frame(&data, w, w, k().as_vector(), &Isometry3::identity(), &NoCorrection);
+        let min_pool = holed_frame(&data, w, w, k().as_vector(), &Isometry3::identity(), &*CorrectionConfig::OFFICIAL_MIN_POOL.build());
+        assert!(!none.holes.iter().any(|h| *h));
+        assert_eq!(min_pool.holes.iter().filter(|h| **h).count(), 1);
+        assert!(min_pool.holes[32 * w + 32]);
+        assert!((from_network(min_pool.start[32 * w + 32]) - 2.0).abs() < 1e-4, "push-pull fills it from the wall");
     }
 
     #[test]

@@ -9,11 +9,13 @@
 use super::checkpoint::{self, sorted_variables, DiffusionMeta, Named, EMA, ONLINE};
 use super::data::FrameSet;
 use super::schedule::Schedule;
+use crate::correction::{CorrectionConfig, Corrector};
 use crate::error::{Error, Result};
 use crate::geometry::PivotPoseSampler;
 use crate::nn::denoiser::{Denoiser, DenoiserConfig};
 use crate::nn::unet::{parameter_count, Preset};
 use crate::rng::Rng;
+use rayon::prelude::*;
 use serde::Serialize;
 use std::path::PathBuf;
 use tch::{nn, Device, Kind, Tensor};
@@ -58,6 +60,9 @@ pub struct DiffusionTrainOptions {
     /// from `start = "push_pull"` at a small start step (with `max_t`).
     pub holes: bool,
     pub hole_weight: f64,
+    /// The corrections a holed frame goes through, one drawn per frame (as the build's
+    /// `[correct.condition]` drops pixels from a re-projected view before the fill).
+    pub hole_corrections: Vec<CorrectionConfig>,
     /// EMA decay cap, update interval and warm-up (official 0.995, 10, 100).
     pub ema_beta: f64,
     pub ema_every: u64,
@@ -98,6 +103,7 @@ impl DiffusionTrainOptions {
             max_t: None,
             holes: false,
             hole_weight: 4.0,
+            hole_corrections: vec![CorrectionConfig::None, CorrectionConfig::OFFICIAL_MIN_POOL],
             ema_beta: 0.995,
             ema_every: 10,
             ema_after: 100,
@@ -133,6 +139,12 @@ impl DiffusionTrainOptions {
         }
         if !(self.hole_weight > 0.0 && self.hole_weight.is_finite()) {
             return bad("--hole-weight", format!("must be positive, got {}", self.hole_weight));
+        }
+        if self.holes && self.hole_corrections.is_empty() {
+            return bad("--holes-correction", "hole-aware training needs at least one correction".into());
+        }
+        for c in &self.hole_corrections {
+            c.validate("--holes-correction")?;
         }
         Ok(())
     }
@@ -222,21 +234,35 @@ fn preview_view(data: &FrameSet, opts: &DiffusionTrainOptions) -> (usize, [f64; 
 
 /// One batch: clean frames `[B, 1, S, S]` and intrinsics `[B, 4]`; with `opts.holes`, also the holed
 /// starts and per-pixel loss weights, both `[B, 1, S, S]`.
-fn make_batch(data: &FrameSet, opts: &DiffusionTrainOptions, rng: &mut Rng) -> (Tensor, Tensor, Option<Holes>) {
+fn make_batch(data: &FrameSet, opts: &DiffusionTrainOptions, correctors: &[Box<dyn Corrector>], rng: &mut Rng) -> (Tensor, Tensor, Option<Holes>) {
     let (w, h) = (data.width, data.height);
     let (cw, ch) = opts.crop.map_or((w, h), |c| (c, c));
     let b = opts.batch;
     let mut x = vec![0f32; b * cw * ch];
     let mut k = vec![0f32; b * 4];
     let (mut start, mut weight) = (Vec::new(), Vec::new());
-    for i in 0..b {
-        let f = &data.frames[rng.below(data.len() as u64) as usize];
-        let (x0, y0) = (rng.below((w - cw + 1) as u64) as usize, rng.below((h - ch + 1) as u64) as usize);
-        let flip = opts.hflip && rng.uniform() < 0.5;
-        let holed = opts.holes.then(|| {
-            let motion = super::holes::sample_motion(&PivotPoseSampler::default(), rng);
-            super::holes::holed_frame(&f.depth, w, h, f.intrinsics, &motion)
-        });
+    // Draws in a fixed order (frame, crop, flip, then for holes the motion and the correction); the holed
+    // frames are then made in parallel, off this thread, so a correction U-Net's one-thread setting does
+    // not reach the training's libtorch thread.
+    let draws: Vec<_> = (0..b)
+        .map(|_| {
+            let f = &data.frames[rng.below(data.len() as u64) as usize];
+            let (x0, y0) = (rng.below((w - cw + 1) as u64) as usize, rng.below((h - ch + 1) as u64) as usize);
+            let flip = opts.hflip && rng.uniform() < 0.5;
+            let holes = opts.holes.then(|| {
+                let motion = super::holes::sample_motion(&PivotPoseSampler::default(), rng);
+                (motion, rng.below(correctors.len() as u64) as usize)
+            });
+            (f, x0, y0, flip, holes)
+        })
+        .collect();
+    let holed: Vec<_> = draws
+        .par_iter()
+        .map(|(f, _, _, _, holes)| {
+            holes.map(|(motion, c)| super::holes::holed_frame(&f.depth, w, h, f.intrinsics, &motion, correctors[c].as_ref()))
+        })
+        .collect();
+    for (i, ((f, x0, y0, flip, _), holed)) in draws.into_iter().zip(holed).enumerate() {
         for r in 0..ch {
             for c in 0..cw {
                 let sc = if flip { x0 + cw - 1 - c } else { x0 + c };
@@ -336,6 +362,7 @@ pub fn train_diffusion(data: &FrameSet, opts: &DiffusionTrainOptions, mut on_rep
         }
     });
     let mut adam = Adam::new(&online, opts.lr, opts.betas);
+    let correctors: Vec<Box<dyn Corrector>> = if opts.holes { opts.hole_corrections.iter().map(|c| c.build()).collect() } else { Vec::new() };
     let latest = opts.out.join(LATEST);
     let mut start = 0u64;
     if opts.resume && latest.exists() {
@@ -377,7 +404,7 @@ pub fn train_diffusion(data: &FrameSet, opts: &DiffusionTrainOptions, mut on_rep
         tch::manual_seed((opts.seed ^ step.wrapping_mul(0x9E37_79B9_7F4A_7C15)) as i64);
         let mut step_loss = 0.0;
         for _ in 0..opts.grad_accum {
-            let (x0, k, holes) = make_batch(data, opts, &mut rng);
+            let (x0, k, holes) = make_batch(data, opts, &correctors, &mut rng);
             let t: Vec<i64> = (0..opts.batch).map(|_| rng.below(t_end) as i64).collect();
             let loss = batch_loss(&net, &schedule, opts.weighting, &x0, &k, &t, holes.as_ref()) / opts.grad_accum as f64;
             loss.backward();

@@ -230,7 +230,7 @@ pub struct CorrectConfig {
 
 impl Default for CorrectConfig {
     fn default() -> Self {
-        let official = CorrectionConfig::MinPool { threshold: 0.0375 };
+        let official = CorrectionConfig::OFFICIAL_MIN_POOL;
         CorrectConfig { condition: official, output: official }
     }
 }
