@@ -4,7 +4,7 @@
 //! 1. The diffusion denoiser, paper preset (≈ 38.4 M parameters), one forward at 256×256, batch 4.
 //! 2. The correction network, paper preset with DepthAugment (≈ 34.1 M), one forward at 256×256, batch 1.
 //! 3. Ours only: the tiny presets' forwards (batch 1), the tiny diffusion inpainter at 25 DDIM steps
-//!    and the fill of `pipelines/demo-networks.toml` at its own settings (seconds per pair).
+//!    and the fill of `pipelines/demo.toml` at its own settings (seconds per pair).
 //!
 //! Both sides run under no-grad with the same libtorch intra-op thread count (`THREADS`, or
 //! `POINTREGGPT_BENCH_THREADS`). The Rust side times ours, writes each network's variables with
@@ -449,7 +449,7 @@ struct TinyRun {
     /// Seconds per pair of `ddnm_sample` at `DDIM_STEPS`, batch 1.
     ddim_s: f64,
     known_fraction: f64,
-    /// Seconds per pair of the `[inpaint]` of `pipelines/demo-networks.toml` (push–pull and sampling), or
+    /// Seconds per pair of the `[inpaint]` of `pipelines/demo.toml` (push–pull and sampling), or
     /// why it could not run.
     demo_fill: std::result::Result<(f64, String), String>,
 }
@@ -536,13 +536,13 @@ fn run_tiny() -> TinyRun {
     }
 }
 
-/// Seconds per pair of the demo-networks fill on one view, and its settings.
+/// Seconds per pair of the demo fill on one view, and its settings.
 fn demo_fill_seconds(depth: Vec<f32>, known: &[bool]) -> std::result::Result<(f64, String), String> {
     use pointreggpt::geometry::{DepthMap, Intrinsics};
     use pointreggpt::inpainting::{InpaintConfig, InpaintContext};
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     std::env::set_current_dir(root).map_err(|e| e.to_string())?;
-    let name = "pipelines/demo-networks.toml";
+    let name = "pipelines/demo.toml";
     let text = std::fs::read_to_string(root.join(name)).map_err(|e| format!("{name}: {e}"))?;
     let config = pointreggpt::pipeline::BuildConfig::from_toml(&text, name).map_err(|e| e.to_string())?;
     config.validate().map_err(|e| e.to_string())?;
@@ -676,9 +676,9 @@ fn print_tiny(t: &TinyRun, denoiser: &PaperRun) {
     match &t.demo_fill {
         Ok((secs, desc)) => println!(
             "{:<44} {:>10}  {:>10.2} s  {desc} (per pair, median of {DDIM_REPS} after 1 warm-up)",
-            "demo-networks.toml fill", t.denoiser_params, secs
+            "demo.toml fill", t.denoiser_params, secs
         ),
-        Err(e) => println!("{:<44} {:>10}  {:>12}  {e}", "demo-networks.toml fill", "-", "n/a"),
+        Err(e) => println!("{:<44} {:>10}  {:>12}  {e}", "demo.toml fill", "-", "n/a"),
     }
     let per_image_s = denoiser.ms / DENOISER_BATCH as f64 / 1e3;
     println!(
