@@ -5,7 +5,7 @@
 //! the holes a camera move opens. Here a training frame gets such holes with its true depth still known:
 //! its points are projected into a camera moved by a (scaled) draw of the build's pivot sampler and back,
 //! so the pixels the moved camera could not see — disocclusions, the strip outside its frustum, the
-//! cracks of forward projection — are unknown, exactly as in a re-projected view, and the rest keep the
+//! cracks of forward projection — are unknown, as in a re-projected view, and the rest keep the
 //! round trip's depth. A corrector then drops pixels as the build's `[correct.condition]` does, and
 //! push–pull fills the unknown pixels as the sampler's start does.
 
@@ -56,7 +56,7 @@ pub const MOTION_SCALE: (f64, f64) = (0.1, 1.0);
 pub const UNET_THRESHOLDS: [f32; 2] = [0.5, 0.99];
 
 /// One holed training frame in network space: the sampler's start (the round trip's known depths with
-/// push–pull in the holes) and the holes (pixels the round trip left unknown).
+/// push–pull in the holes) and the holes (pixels unknown after the round trip and the correction).
 pub struct HoledFrame {
     pub start: Vec<f32>,
     pub holes: Vec<bool>,
