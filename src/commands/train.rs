@@ -63,8 +63,8 @@ pub struct TrainDiffusionArgs {
     pub max_t: Option<usize>,
     /// Hole-aware training, for the push-pull-started sampler (with --max-t): each frame gets the holes a
     /// camera move opens (a round trip through a camera drawn from the build's pivot sampler, its motion
-    /// scaled by U(0.1, 1)) and a correction (see --holes-correction), filled by push-pull, and is noised from that fill; the loss counts only
-    /// pixels with true depth, the holes --hole-weight times as much.
+    /// scaled by U(0.1, 1)) and a correction (see --holes-correction), filled by push-pull, and is noised
+    /// from that fill; the loss counts only pixels with true depth, the holes --hole-weight times as much.
     #[arg(long)]
     pub holes: bool,
     /// Loss weight of hole pixels relative to the others, with --holes.
@@ -293,7 +293,7 @@ fn run_diffusion(a: &TrainDiffusionArgs, out: &mut dyn Write) -> Result<()> {
     opts.max_t = a.max_t.or(opts.max_t);
     opts.holes = a.holes;
     opts.hole_weight = a.hole_weight.unwrap_or(opts.hole_weight);
-    if a.holes_correction.is_some() && !a.holes || a.hole_weight.is_some() && !a.holes {
+    if !a.holes && (a.holes_correction.is_some() || a.hole_weight.is_some()) {
         return Err(Error::config("--holes-correction/--hole-weight", "only apply with --holes"));
     }
     if let Some(path) = &a.holes_correction {

@@ -140,11 +140,13 @@ impl DiffusionTrainOptions {
         if !(self.hole_weight > 0.0 && self.hole_weight.is_finite()) {
             return bad("--hole-weight", format!("must be positive, got {}", self.hole_weight));
         }
-        if self.holes && self.hole_corrections.is_empty() {
-            return bad("--holes-correction", "hole-aware training needs at least one correction".into());
-        }
-        for c in &self.hole_corrections {
-            c.validate("--holes-correction")?;
+        if self.holes {
+            if self.hole_corrections.is_empty() {
+                return bad("--holes-correction", "hole-aware training needs at least one correction".into());
+            }
+            for c in &self.hole_corrections {
+                c.validate("--holes-correction")?;
+            }
         }
         Ok(())
     }
@@ -313,8 +315,8 @@ pub fn batch_loss(net: &Denoiser, schedule: &Schedule, weighting: Weighting, x0:
         .collect();
     let ab = Tensor::from_slice(&ab).view([b, 1, 1, 1]).to_device(device);
     let noise = x0.randn_like();
-    let clean = holes.map_or(x0, |h| &h.start);
-    let xt = clean * ab.sqrt() + noise * (ab.ones_like() - &ab).sqrt();
+    let noised_from = holes.map_or(x0, |h| &h.start);
+    let xt = noised_from * ab.sqrt() + noise * (ab.ones_like() - &ab).sqrt();
     let pred = net.forward(&xt, &Tensor::from_slice(t).to_device(device), k);
     let dims = &[1i64, 2, 3][..];
     let per_frame = match holes {
