@@ -19,6 +19,7 @@ pub mod runtime;
 pub mod shards;
 pub mod sources;
 pub mod stages;
+pub mod training;
 pub mod tsdf;
 
 pub use error::{Error, Result};

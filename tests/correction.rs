@@ -4,16 +4,16 @@
 
 mod support;
 
-use pointreggpt::correction::{CorrectionConfig, Corrector};
+use pointreggpt::correction::{CorrectionConfig, Corrector, UnetCorrector};
 use pointreggpt::geometry::DepthMap;
 use pointreggpt::labels::{run_labels, LabelsConfig};
 use pointreggpt::nn::checkpoint::{infer_official_config, save_official_layout};
-use pointreggpt::nn::data::LabelSet;
-use pointreggpt::nn::evaluate::{evaluate_net, handcrafted_rows, THRESHOLDS};
-use pointreggpt::nn::train::{train_correction, TrainOptions};
 use pointreggpt::nn::unet::parameter_count;
 use pointreggpt::nn::*;
 use pointreggpt::pipeline::BuildOptions;
+use pointreggpt::training::correction::data::LabelSet;
+use pointreggpt::training::correction::evaluate::{evaluate_net, handcrafted_rows, THRESHOLDS};
+use pointreggpt::training::correction::train::{train_correction, TrainOptions};
 use pointreggpt::rng::Rng;
 use pointreggpt::runtime::CancelToken;
 use std::collections::BTreeMap;

@@ -5,10 +5,11 @@
 mod support;
 
 use pointreggpt::diffusion::checkpoint::{export_ema, load_denoiser, save, sorted_variables, DiffusionMeta, EMA, FORMAT};
-use pointreggpt::diffusion::data::{to_network, FrameSet, TrainFrame};
+use pointreggpt::nn::space::to_network;
+use pointreggpt::training::diffusion::data::{FrameSet, TrainFrame};
 use pointreggpt::correction::NoCorrection;
-use pointreggpt::diffusion::holes::holed_frame;
-use pointreggpt::diffusion::train::{batch_loss, train_diffusion, DiffusionTrainOptions, Holes, Weighting, LATEST};
+use pointreggpt::training::diffusion::holes::holed_frame;
+use pointreggpt::training::diffusion::train::{batch_loss, train_diffusion, DiffusionTrainOptions, Holes, Weighting, LATEST};
 use pointreggpt::diffusion::sampler::Resample;
 use pointreggpt::diffusion::{ddnm_sample, Problem, SamplerOptions, Schedule};
 use pointreggpt::geometry::{DepthMap, Intrinsics};

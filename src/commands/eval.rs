@@ -2,8 +2,8 @@
 //! compare correction and fill methods against the depth captured on real sequences (tables and CSV).
 
 use crate::error::{Error, Result};
-use crate::nn::data::LabelSet;
-use crate::nn::evaluate::{evaluate_all, format_table, to_csv, THRESHOLDS};
+use crate::training::correction::data::LabelSet;
+use crate::training::correction::evaluate::{evaluate_all, format_table, to_csv, THRESHOLDS};
 use std::io::Write;
 use std::path::PathBuf;
 
@@ -158,11 +158,11 @@ fn run_correction(a: &EvalCorrectionArgs, out: &mut dyn Write) -> Result<()> {
 
 fn run_inpaint(a: &EvalInpaintArgs, out: &mut dyn Write) -> Result<()> {
     use crate::correction::CorrectionConfig;
-    use crate::diffusion::evaluate::{evaluate, format_table, make_view, to_csv, NamedCorrector, NamedFill};
+    use crate::training::eval_inpaint::{evaluate, format_table, make_view, to_csv, NamedCorrector, NamedFill};
     use crate::diffusion::sampler::Resample;
     use crate::inpainting::{DiffusionInpaintConfig, InpaintConfig, Start};
     use crate::nn::ModelPath;
-    use crate::pipeline::config::WorkingConfig;
+    use crate::stages::ingest::WorkingConfig;
     let w = |e: std::io::Error| Error::io("<stdout>", e);
     if a.gap == 0 || a.every == 0 {
         return Err(Error::config("--gap/--every", "must be at least 1"));
@@ -215,7 +215,7 @@ fn run_inpaint(a: &EvalInpaintArgs, out: &mut dyn Write) -> Result<()> {
         fills.push(NamedFill { name, inpainter: diffusion.build()? });
     }
     writeln!(out, "{} views ({} frames apart) from {}", views.len(), a.gap, a.sequences.display()).map_err(w)?;
-    let bar = crate::export::rows::progress_bar(views.len() as u64, !a.quiet, "views");
+    let bar = crate::runtime::progress::bar(views.len() as u64, !a.quiet, "views");
     let range = (working.depth_range[0], working.depth_range[1]);
     let rows = evaluate(&views, &corrections, &fills, range, || bar.inc(1));
     bar.finish_and_clear();

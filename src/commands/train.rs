@@ -2,8 +2,8 @@
 //! diffusion denoiser on depth frames.
 
 use crate::error::{Error, Result};
-use crate::nn::data::LabelSet;
-use crate::nn::train::{train_correction, LossPixels, TrainOptions, BEST, BEST_METRIC, LATEST, METRICS_LOG};
+use crate::training::correction::data::LabelSet;
+use crate::training::correction::train::{train_correction, LossPixels, TrainOptions, BEST, BEST_METRIC, LATEST, METRICS_LOG};
 use crate::nn::Preset;
 use std::io::Write;
 use std::path::PathBuf;
@@ -56,7 +56,7 @@ pub struct TrainDiffusionArgs {
     pub crop: Option<usize>,
     /// Loss weight per time step.
     #[arg(long, value_enum)]
-    pub weighting: Option<crate::diffusion::train::Weighting>,
+    pub weighting: Option<crate::training::diffusion::train::Weighting>,
     /// Train only on time steps 0..MAX_T (default: all 1000). A model for the push-pull-started sampler
     /// (`[inpaint] start = "push_pull"`, `start_step` below MAX_T), which never sees larger steps.
     #[arg(long)]
@@ -277,8 +277,8 @@ fn run_correction(a: &TrainCorrectionArgs, out: &mut dyn Write) -> Result<()> {
 }
 
 fn run_diffusion(a: &TrainDiffusionArgs, out: &mut dyn Write) -> Result<()> {
-    use crate::diffusion::data::FrameSet;
-    use crate::diffusion::train::{train_diffusion, DiffusionTrainOptions, LATEST, LOSS_LOG};
+    use crate::training::diffusion::data::FrameSet;
+    use crate::training::diffusion::train::{train_diffusion, DiffusionTrainOptions, LATEST, LOSS_LOG};
     let w = |e: std::io::Error| Error::io("<stdout>", e);
     crate::nn::set_torch_threads(a.torch_threads)?;
     let mut opts = DiffusionTrainOptions::for_preset(a.preset, a.out.clone());
@@ -298,7 +298,7 @@ fn run_diffusion(a: &TrainDiffusionArgs, out: &mut dyn Write) -> Result<()> {
     }
     if let Some(path) = &a.holes_correction {
         let checkpoint = crate::nn::ModelPath::new(&path.display().to_string());
-        for threshold in crate::diffusion::holes::UNET_THRESHOLDS {
+        for threshold in crate::training::diffusion::holes::UNET_THRESHOLDS {
             opts.hole_corrections.push(crate::correction::CorrectionConfig::Unet { checkpoint, threshold, preset: None });
         }
     }

@@ -80,7 +80,7 @@ pub fn export(ds: &Dataset, opts: &ExportOptions) -> Result<ExportReport> {
         Format::Geotransformer => Box::new(geotransformer::GeoTransformerWriter::new(&opts.out)),
         Format::Ply => Box::new(ply::PlyWriter::new(&opts.out)),
     };
-    let bar = rows::progress_bar(rows::committed_row_count(ds)?, opts.progress, "export");
+    let bar = crate::runtime::progress::bar(rows::committed_row_count(ds)?, opts.progress, "export");
     let mut report = ExportReport::default();
     rows::for_each_row(ds, |row| {
         bar.inc(1);

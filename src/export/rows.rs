@@ -1,11 +1,10 @@
 //! Streaming the committed rows of a dataset shard by shard (so memory holds one shard), in unit order,
-//! and the progress bar the export, preview and stats commands draw over them.
+//! and the file naming the export and preview commands share.
 
 use crate::error::{Error, Result};
 use crate::shards::dataset::{Dataset, PAIRS_TABLE};
 use crate::shards::pairs::batch_to_pairs;
 use crate::shards::row::PairRow;
-use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 /// Rows of the committed `pairs` shards, from their manifest entries.
 pub fn committed_row_count(ds: &Dataset) -> Result<u64> {
@@ -29,15 +28,6 @@ pub fn for_each_row(ds: &Dataset, mut f: impl FnMut(PairRow) -> Result<bool>) ->
         }
     }
     Ok(())
-}
-
-/// A bar over `total` rows on stderr, drawn only when `visible` and stderr is a terminal.
-pub fn progress_bar(total: u64, visible: bool, label: &str) -> ProgressBar {
-    let target = if visible { ProgressDrawTarget::stderr_with_hz(4) } else { ProgressDrawTarget::hidden() };
-    let style = ProgressStyle::with_template("{prefix:>10} {bar:30} {pos:>7}/{len:7} {per_sec:>10} {msg}")
-        .expect("valid template")
-        .progress_chars("=> ");
-    ProgressBar::with_draw_target(Some(total), target).with_style(style).with_prefix(label.to_string())
 }
 
 /// A file-name-safe form of a key: characters other than ASCII letters, digits, `.`, `-` and `_`

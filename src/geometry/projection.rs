@@ -1,6 +1,6 @@
 //! Z-buffer projection of a point cloud into a camera: the nearest point wins each pixel.
 
-use super::{DepthMap, Intrinsics, Point, F64_TO_INT_MAGIC};
+use super::{AxisBox, DepthMap, DepthRange, Intrinsics, Point, F64_TO_INT_MAGIC};
 use nalgebra::Isometry3;
 use rayon::prelude::*;
 
@@ -159,33 +159,68 @@ impl Lander {
         self.land_body(block, idx, zb)
     }
 
-    /// The one formula, compiled twice (baseline and AVX2): separate multiplies and adds and an exact
-    /// division, so both give the same bits.
+    /// The z-buffer's inner loop, compiled twice (baseline and AVX2) around the one formula
+    /// [`Lander::project`], which uses separate multiplies and adds and an exact division, so both give
+    /// the same bits.
     #[inline(always)]
     fn land_body(&self, block: &[Point], idx: &mut [u32; BLOCK], zb: &mut [u32; BLOCK]) {
-        let m = &self.m;
         let outside = self.pixels as u32;
         for (j, p) in block.iter().enumerate().take(BLOCK) {
-            let (x, y, z) = (p.x as f64, p.y as f64, p.z as f64);
-            let zc = m[2][0] * x + m[2][1] * y + m[2][2] * z + m[2][3];
-            let xc = m[0][0] * x + m[0][1] * y + m[0][2] * z + m[0][3];
-            let yc = m[1][0] * x + m[1][1] * y + m[1][2] * z + m[1][3];
-            let zf = zc as f32;
-            let u = (xc * self.fx / zc + self.cx).round_ties_even();
-            let v = (yc * self.fy / zc + self.cy).round_ties_even();
-            let inside = zf > 0.0 && zf < f32::INFINITY && u >= 0.0 && v >= 0.0 && u < self.w && v < self.h;
-            // `v·W + u` is an exact integer below 2^32 when inside; adding 1.5·2^52 puts it in the low bits.
-            let pixel = ((v * self.w + u) + F64_TO_INT_MAGIC).to_bits() as u32;
+            let (_, _, zc, pixel, inside) = self.project(p);
             idx[j] = if inside { pixel } else { outside };
-            zb[j] = zf.to_bits();
+            zb[j] = (zc as f32).to_bits();
         }
+    }
+
+    /// Where one point lands: its camera coordinates `(x, y, z)`, its pixel index `v·W + u` and whether
+    /// it lands (z > 0 and finite, pixel inside the image). The pixel index is meaningful only when it lands.
+    #[inline(always)]
+    fn project(&self, p: &Point) -> (f64, f64, f64, u32, bool) {
+        let m = &self.m;
+        let (x, y, z) = (p.x as f64, p.y as f64, p.z as f64);
+        let zc = m[2][0] * x + m[2][1] * y + m[2][2] * z + m[2][3];
+        let xc = m[0][0] * x + m[0][1] * y + m[0][2] * z + m[0][3];
+        let yc = m[1][0] * x + m[1][1] * y + m[1][2] * z + m[1][3];
+        let zf = zc as f32;
+        let u = (xc * self.fx / zc + self.cx).round_ties_even();
+        let v = (yc * self.fy / zc + self.cy).round_ties_even();
+        let inside = zf > 0.0 && zf < f32::INFINITY && u >= 0.0 && v >= 0.0 && u < self.w && v < self.h;
+        // `v·W + u` is an exact integer below 2^32 when inside; adding 1.5·2^52 puts it in the low bits.
+        let pixel = ((v * self.w + u) + F64_TO_INT_MAGIC).to_bits() as u32;
+        (xc, yc, zc, pixel, inside)
+    }
+}
+
+/// Cheap overlap estimate for pose sampling: the share of every `stride`-th point of `points` (source
+/// frame) that lands in camera `k` under `t_target_from_source` ([`project_zbuffer`]'s projection) with
+/// its depth inside `range` and its camera-frame position inside `crop_box`. 0 for no points.
+pub fn coverage(
+    points: &[Point],
+    t_target_from_source: &Isometry3<f64>,
+    k: &Intrinsics,
+    range: DepthRange,
+    crop_box: &AxisBox,
+    stride: usize,
+) -> f64 {
+    let lander = Lander::new(t_target_from_source, k);
+    let (mut seen, mut total) = (0usize, 0usize);
+    for p in points.iter().step_by(stride.max(1)) {
+        total += 1;
+        let (x, y, z, _, lands) = lander.project(p);
+        let q = Point::new(x as f32, y as f32, z as f32);
+        seen += (lands && range.contains(q.z) && crop_box.contains(&q)) as usize;
+    }
+    if total == 0 {
+        0.0
+    } else {
+        seen as f64 / total as f64
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::{backproject, DepthRange};
+    use crate::geometry::backproject;
 
     #[test]
     fn nearest_point_wins_and_ties_go_to_lowest_index() {
@@ -272,5 +307,30 @@ mod tests {
         for (kn, z) in p.known.iter().zip(d.data()) {
             assert_eq!(*kn, *z > 0.0);
         }
+    }
+
+    #[test]
+    fn coverage_counts_the_points_that_land_inside_image_range_and_box() {
+        // A 3x1 camera looking down z: a point ahead, one outside the image, one beyond the range, one
+        // outside the box, one behind the camera; every second point with stride 2.
+        let k = Intrinsics::new(1.0, 1.0, 1.0, 0.0, 3, 1).unwrap();
+        let range = DepthRange { near: 0.5, far: 5.0 };
+        let crop = AxisBox { min: [-1.0, -1.0, 0.5], max: [1.0, 1.0, 3.0] };
+        let pts = vec![
+            Point::new(0.0, 0.0, 2.0),  // lands, inside everything
+            Point::new(9.0, 0.0, 2.0),  // outside the image
+            Point::new(0.0, 0.0, 6.0),  // beyond the range
+            Point::new(0.0, 0.0, 4.0),  // inside range, outside the box
+            Point::new(0.0, 0.0, -2.0), // behind the camera
+            Point::new(0.5, 0.0, 1.0),  // lands (column 1.5 -> 2), inside
+        ];
+        let id = Isometry3::identity();
+        assert_eq!(coverage(&pts, &id, &k, range, &crop, 1), 2.0 / 6.0);
+        assert_eq!(coverage(&pts, &id, &k, range, &crop, 2), 1.0 / 3.0, "points 0, 2, 4");
+        assert_eq!(coverage(&[], &id, &k, range, &crop, 1), 0.0);
+        // The camera 1 m back: the first point moves to 3 m, on the box's far face (inside); the fourth to 5 m.
+        let back = Isometry3::translation(0.0, 0.0, 1.0);
+        assert_eq!(coverage(&pts[..1], &back, &k, range, &crop, 1), 1.0);
+        assert_eq!(coverage(&pts[3..4], &back, &k, range, &crop, 1), 0.0);
     }
 }

@@ -2,7 +2,7 @@
 //! ([`crate::diffusion::sampler`]), so the known pixels of the output are the input's.
 
 use super::{InpaintContext, Inpainter, PushPull};
-use crate::diffusion::data::{from_network, to_network};
+use crate::nn::space::{from_network, to_network};
 use crate::diffusion::sampler::{ddnm_sample, Problem, Resample, SamplerOptions};
 use crate::diffusion::schedule::Schedule;
 use crate::diffusion::model::{is_torchscript, load_model, NativeModel, X0Model};

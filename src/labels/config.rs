@@ -1,7 +1,9 @@
 //! The label pipeline's configuration.
 
 use crate::error::{Error, Result};
-use crate::pipeline::config::{PoseConfig, SourceConfig, WorkingConfig};
+use crate::sources::SourceConfig;
+use crate::stages::ingest::WorkingConfig;
+use crate::stages::pose::PoseConfig;
 use crate::tsdf::TsdfConfig;
 use serde::{Deserialize, Serialize};
 
@@ -153,27 +155,9 @@ impl LabelsConfig {
         if !(self.tau_gt.is_finite() && self.tau_gt > 0.0 && self.tau_gt < 10.0) {
             return bad("tau_gt", "must be a positive number of metres");
         }
-        // The working, pose and source sections follow the build's rules.
-        self.as_build_config().validate()
-    }
-
-    /// The source, working and pose sections as a build config (every frame selected), to reuse the
-    /// build's frame catalog and checks.
-    pub fn as_build_config(&self) -> crate::pipeline::BuildConfig {
-        crate::pipeline::BuildConfig {
-            seed: self.seed,
-            samples_per_frame: 1,
-            shard_size: 1,
-            source: self.source.clone(),
-            select: Default::default(),
-            working: self.working.clone(),
-            pose: self.pose.clone(),
-            correct: Default::default(),
-            inpaint: crate::inpainting::InpaintConfig::None,
-            successive: Default::default(),
-            voxelize: Default::default(),
-            validate: Default::default(),
-            output: Default::default(),
-        }
+        // The source, working and pose sections follow the build's rules.
+        self.source.validate()?;
+        self.working.validate()?;
+        self.pose.validate()
     }
 }

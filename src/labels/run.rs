@@ -4,7 +4,7 @@ use super::config::LabelsConfig;
 use super::stages::{Fuse, LabelSink, LabelUnit, SampleAndLabel};
 use super::windows::windows;
 use crate::error::Result;
-use crate::pipeline::catalog::{check_worker, plan_shards, shard_count, shard_units};
+use crate::shards::plan::{check_worker, plan_shards, shard_count, shard_units};
 use crate::pipeline::BuildOptions;
 use crate::runtime::{run_pipeline, CancelToken, RunSummary, StageSpec};
 use crate::shards::dataset::Dataset;
@@ -50,10 +50,7 @@ pub fn run_labels(config: &LabelsConfig, opts: &BuildOptions, cancel: &CancelTok
                 window,
                 status: Status::Ok,
                 message: String::new(),
-                k: None,
-                dense: Vec::new(),
-                sparse: Vec::new(),
-                volume: None,
+                fused: None,
                 rows: Vec::new(),
                 timings: BTreeMap::new(),
             }

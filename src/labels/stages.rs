@@ -1,20 +1,19 @@
-//! The label pipeline's operators: fuse a window, then sample, re-project and label; and its sink.
+//! The label pipeline's operators, thin adapters over [`super::label`]: fuse a window, then sample,
+//! re-project and label; and the sink that commits label shards.
 
-use super::config::{DenseMode, LabelsConfig};
-use super::label::keep_label;
+use super::config::LabelsConfig;
+use super::label::{fuse_window, label_view, FusedWindow};
 use super::windows::Window;
 use crate::error::{Error, Result};
-use crate::geometry::{pose_to_rows, project_zbuffer, relative_pose, voxel_downsample, Intrinsics, Point, ResizeCrop};
-use crate::pipeline::catalog::Catalog;
-use crate::pipeline::config::IntrinsicsMap;
+use crate::geometry::pose_to_rows;
 use crate::rng::Rng;
 use crate::runtime::{Item, Sink, Stage};
 use crate::shards::dataset::Dataset;
 use crate::shards::labels::{labels_to_batch, LabelRow, LABELS_TABLE};
 use crate::shards::row::Status;
 use crate::sources::depth_png::encode_depth_png;
+use crate::sources::Catalog;
 use crate::stages::pack::encode_mask_png;
-use crate::tsdf::TsdfVolume;
 use std::collections::{BTreeMap, BTreeSet};
 use std::sync::Arc;
 use std::time::Duration;
@@ -26,13 +25,8 @@ pub struct LabelUnit {
     pub seed: u64,
     pub status: Status,
     pub message: String,
-    /// Working intrinsics of the reference camera.
-    pub k: Option<Intrinsics>,
-    /// Dense surface points and their sparse copy, reference camera frame, cropped to the box.
-    pub dense: Vec<Point>,
-    pub sparse: Vec<Point>,
-    /// The fused volume, kept until the label stage when `I_d` is ray cast.
-    pub volume: Option<TsdfVolume>,
+    /// The fused window (reference camera frame), until the label stage has used it.
+    pub fused: Option<FusedWindow>,
     pub rows: Vec<LabelRow>,
     pub timings: BTreeMap<String, f64>,
 }
@@ -59,31 +53,8 @@ pub struct Fuse {
 impl Fuse {
     fn fuse(&self, u: &mut LabelUnit) -> Result<()> {
         let reference = self.catalog.load(u.window.reference)?;
-        let t_world_from_ref = reference
-            .t_world_from_camera
-            .ok_or_else(|| Error::input(&reference.depth_path, "frame has no camera pose (missing pose file)"))?;
-        let mut volume = TsdfVolume::new(self.config.tsdf.clone())?;
-        for &i in &u.window.frames {
-            let f = self.catalog.load(i)?;
-            let pose = f.t_world_from_camera.ok_or_else(|| Error::input(&f.depth_path, "frame has no camera pose (missing pose file)"))?;
-            volume.integrate(&f.depth, &f.intrinsics, &relative_pose(&t_world_from_ref, &pose))?;
-        }
-        let w = &self.config.working;
-        let dense = w.crop_box.crop(&volume.extract_points(self.config.clouds.weight_threshold));
-        if dense.is_empty() {
-            return Err(Error::input(&reference.depth_path, "the fused window has no surface inside the crop box"));
-        }
-        let k0 = &reference.intrinsics;
-        let rc = ResizeCrop::official(k0.width, k0.height, w.size)?;
-        u.k = Some(match w.intrinsics {
-            IntrinsicsMap::Official => rc.official_intrinsics(k0)?,
-            IntrinsicsMap::Exact => rc.exact_intrinsics(k0)?,
-        });
-        u.sparse = voxel_downsample(&dense, self.config.clouds.sparse_voxel);
-        u.dense = dense;
-        if self.config.clouds.dense == DenseMode::Raycast {
-            u.volume = Some(volume);
-        }
+        let frames = u.window.frames.iter().map(|&i| self.catalog.load(i));
+        u.fused = Some(fuse_window(&reference, frames, &self.config)?);
         Ok(())
     }
 }
@@ -123,6 +94,7 @@ impl Stage<LabelUnit> for SampleAndLabel {
     }
     fn process(&mut self, u: &mut LabelUnit) -> Result<()> {
         let c = &self.config;
+        let fused = u.fused.take();
         let base = |sample: u32| LabelRow {
             unit_index: u.unit_index,
             sample_index: sample,
@@ -137,13 +109,13 @@ impl Stage<LabelUnit> for SampleAndLabel {
             seed: crate::rng::unit_seed(c.seed, &u.window.key, sample as u64),
             width: c.working.size,
             height: c.working.size,
-            intrinsics: u.k.map(|k| k.as_vector()).unwrap_or([0.0; 4]),
+            intrinsics: fused.as_ref().map(|f| f.k.as_vector()).unwrap_or([0.0; 4]),
             t_target_from_reference: pose_to_rows(&nalgebra::Isometry3::identity()),
             tsdf_voxel: c.tsdf.voxel_size_m,
             sparse_voxel: c.clouds.sparse_voxel,
             tau_gt: c.tau_gt,
-            dense_points: u.dense.len() as u64,
-            sparse_points: u.sparse.len() as u64,
+            dense_points: fused.as_ref().map_or(0, |f| f.dense.len() as u64),
+            sparse_points: fused.as_ref().map_or(0, |f| f.sparse.len() as u64),
             sparse_pixels: 0,
             dropped_pixels: 0,
             sparse_depth_png: Vec::new(),
@@ -158,43 +130,24 @@ impl Stage<LabelUnit> for SampleAndLabel {
             u.rows.push(base(0));
             return Ok(());
         }
-        let k = u.k.expect("fuse sets the intrinsics");
+        let fused = fused.as_ref().expect("fuse sets the window of an ok unit");
+        let k = fused.k;
         let sampler = c.pose.pivot_sampler();
         for sample in 0..c.samples_per_window {
             let mut row = base(sample);
-            let mut rng = Rng::new(row.seed).fork(crate::stages::streams::POSE);
-            let t = sampler.sample(&mut rng);
-            let points = project_zbuffer(&u.dense, &t, &k, false).depth;
-            let dense = match &u.volume {
-                Some(v) => fill_holes(v.raycast(&k, &t.inverse())?, &points),
-                None => points,
-            };
-            let sparse = project_zbuffer(&u.sparse, &t, &k, false).depth;
-            let keep = keep_label(&sparse, &dense, c.tau_gt);
-            row.sparse_pixels = sparse.data().iter().filter(|z| **z > 0.0).count() as u64;
-            row.dropped_pixels = sparse.data().iter().zip(&keep).filter(|(z, k)| **z > 0.0 && !**k).count() as u64;
+            let t = sampler.sample(&mut Rng::new(row.seed).fork(crate::stages::streams::POSE));
+            let view = label_view(fused, &t, c.tau_gt)?;
+            let sparse = view.sparse.data();
+            row.sparse_pixels = sparse.iter().filter(|z| **z > 0.0).count() as u64;
+            row.dropped_pixels = sparse.iter().zip(&view.keep).filter(|(z, k)| **z > 0.0 && !**k).count() as u64;
             row.t_target_from_reference = pose_to_rows(&t);
-            row.sparse_depth_png = encode_depth_png(k.width, k.height, &sparse.to_raw(1000.0))?;
-            row.dense_depth_png = encode_depth_png(k.width, k.height, &dense.to_raw(1000.0))?;
-            row.label_png = encode_mask_png(&keep, k.width, k.height)?;
+            row.sparse_depth_png = encode_depth_png(k.width, k.height, &view.sparse.to_raw(1000.0))?;
+            row.dense_depth_png = encode_depth_png(k.width, k.height, &view.dense.to_raw(1000.0))?;
+            row.label_png = encode_mask_png(&view.keep, k.width, k.height)?;
             u.rows.push(row);
         }
-        u.dense = Vec::new();
-        u.sparse = Vec::new();
-        u.volume = None;
         Ok(())
     }
-}
-
-/// `raycast` with its empty pixels taken from the z-buffered dense points (the ray misses thin edges
-/// of the observed region that the extracted points still cover).
-fn fill_holes(mut raycast: crate::geometry::DepthMap, points: &crate::geometry::DepthMap) -> crate::geometry::DepthMap {
-    for (r, p) in raycast.data_mut().iter_mut().zip(points.data()) {
-        if *r == 0.0 {
-            *r = *p;
-        }
-    }
-    raycast
 }
 
 /// Commits label shards (a fixed range of windows each) once all their windows are in.
@@ -223,7 +176,7 @@ impl Sink<LabelUnit> for LabelSink<'_> {
         }
         let buf = self.buffers.entry(shard).or_default();
         buf.push(unit);
-        let (first, end) = crate::pipeline::catalog::shard_units(shard, self.shard_size, self.total_units);
+        let (first, end) = crate::shards::plan::shard_units(shard, self.shard_size, self.total_units);
         if buf.len() as u64 == end - first {
             let mut units = self.buffers.remove(&shard).expect("buffer");
             units.sort_by_key(|u| u.unit_index);

@@ -2,7 +2,7 @@
 
 use super::config::{LabelsConfig, Reference};
 use crate::error::{Error, Result};
-use crate::pipeline::catalog::Catalog;
+use crate::sources::{Catalog, SelectConfig};
 
 /// One window: catalog indices of its consecutive frames and of its reference frame.
 #[derive(Clone, Debug)]
@@ -16,7 +16,7 @@ pub struct Window {
 
 /// Every frame of every sequence (no selection), and the windows over them.
 pub fn windows(config: &LabelsConfig) -> Result<(Catalog, Vec<Window>)> {
-    let catalog = Catalog::open(&config.as_build_config())?;
+    let catalog = Catalog::open(&config.source, &SelectConfig::default(), 1)?;
     let mut out = Vec::new();
     let mut start = 0;
     while start < catalog.frames.len() {

@@ -43,7 +43,7 @@ mod tests {
             let t = Tensor::from_slice(&data).view([1, 1, h as i64, w as i64]);
             let got: Vec<f32> = Vec::try_from(depth_augment(&t).flatten(0, -1)).unwrap();
             let expect_min =
-                crate::correction::minpool::valid_min3x3(&DepthMap::new(w as u32, h as u32, data.clone()).unwrap());
+                crate::geometry::valid_min3x3(&DepthMap::new(w as u32, h as u32, data.clone()).unwrap());
             for i in 0..w * h {
                 let m = if expect_min[i].is_finite() { expect_min[i] } else { 0.0 };
                 assert_eq!(got[i], data[i]);

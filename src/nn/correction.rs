@@ -1,17 +1,11 @@
 //! The depth-correction network (reference §4.1 `MaskUnet`): DepthAugment → U-Net → sigmoid keep
-//! probability, and its inference wrapper implementing [`crate::correction::Corrector`].
+//! probability. The build's corrector around it is `crate::correction::UnetCorrector`.
 
 use super::augment::depth_augment;
 use super::unet::{Preset, Unet, UnetConfig};
-use crate::correction::Corrector;
 use crate::error::{Error, Result};
-use crate::geometry::DepthMap;
 use serde::{Deserialize, Serialize};
-use std::sync::Mutex;
 use tch::{nn, Device, Kind, Tensor};
-
-/// Metres per unit of the network's depth input (1.0 = 10 m; deeper is treated as missing).
-pub const DEPTH_SCALE_M: f32 = 10.0;
 
 /// Hyperparameters of a [`CorrectionNet`].
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -75,16 +69,6 @@ impl CorrectionNet {
     }
 }
 
-/// The network's input value of a metric depth: `z / 10`, with missing, non-finite and > 10 m as 0.
-pub fn normalise_depth(z: f32) -> f32 {
-    let v = z / DEPTH_SCALE_M;
-    if v.is_finite() && v > 0.0 && v <= 1.0 {
-        v
-    } else {
-        0.0
-    }
-}
-
 /// Keep probabilities of same-sized normalised depth maps (`[0, 1]` values, row-major), in batches of
 /// `batch`, padding H and W with missing depth up to the U-Net's size multiple.
 pub fn keep_probabilities(
@@ -121,68 +105,4 @@ pub fn keep_probabilities(
         }
     });
     out
-}
-
-struct Loaded {
-    _vs: nn::VarStore,
-    net: CorrectionNet,
-}
-
-/// A trained [`CorrectionNet`] as a [`Corrector`]: keeps a pixel when its keep probability exceeds
-/// `threshold` (τ_m; official 0.99) or when it has no depth.
-pub struct UnetCorrector {
-    loaded: Mutex<Loaded>,
-    threshold: f32,
-    device: Device,
-}
-
-impl UnetCorrector {
-    /// Wraps a network whose variables live in `vs`.
-    pub fn new(vs: nn::VarStore, net: CorrectionNet, threshold: f32) -> Self {
-        let device = vs.device();
-        UnetCorrector { loaded: Mutex::new(Loaded { _vs: vs, net }), threshold, device }
-    }
-
-    /// Loads a checkpoint (see [`super::checkpoint::load_correction`]) onto `device`.
-    pub fn load(path: &std::path::Path, threshold: f32, device: Device) -> Result<Self> {
-        let (vs, net, _) = super::checkpoint::load_correction(path, device)?;
-        Ok(UnetCorrector::new(vs, net, threshold))
-    }
-
-    pub fn threshold(&self) -> f32 {
-        self.threshold
-    }
-
-    /// The network's configuration.
-    pub fn config(&self) -> CorrectionNetConfig {
-        self.lock().net.config.clone()
-    }
-
-    fn lock(&self) -> std::sync::MutexGuard<'_, Loaded> {
-        self.loaded.lock().unwrap_or_else(|e| e.into_inner())
-    }
-
-    /// Keep probability of every pixel of same-sized depth maps (metres), batched by `batch`.
-    pub fn probabilities(&self, maps: &[&DepthMap], batch: usize) -> Vec<Vec<f32>> {
-        let Some(first) = maps.first() else { return Vec::new() };
-        let (w, h) = (first.width() as usize, first.height() as usize);
-        let inputs: Vec<Vec<f32>> =
-            maps.iter().map(|d| d.data().iter().map(|z| normalise_depth(*z)).collect()).collect();
-        let refs: Vec<&[f32]> = inputs.iter().map(Vec::as_slice).collect();
-        keep_probabilities(&self.lock().net, self.device, w, h, &refs, batch)
-    }
-}
-
-impl Corrector for UnetCorrector {
-    fn name(&self) -> &'static str {
-        "unet"
-    }
-
-    /// Runs with one libtorch intra-op thread (set on the calling thread): the pipeline already runs one
-    /// corrector per worker thread, and more threads than cores make libtorch's workers spin.
-    fn keep_mask(&self, depth: &DepthMap) -> Vec<bool> {
-        tch::set_num_threads(1);
-        let p = self.probabilities(&[depth], 1).pop().expect("one map");
-        depth.data().iter().zip(p).map(|(z, p)| normalise_depth(*z) == 0.0 || p > self.threshold).collect()
-    }
 }

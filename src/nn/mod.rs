@@ -1,16 +1,17 @@
-//! Neural networks on libtorch (tch): the shared U-Net skeleton, the depth-correction network (with its
-//! checkpoints, training and evaluation) and the diffusion denoiser (schedule, sampler and training live
-//! in [`crate::diffusion`]).
+//! Neural networks on libtorch (tch), inference side: the shared U-Net skeleton, the depth-correction
+//! network, the diffusion denoiser, their checkpoints and the network-space depth mapping. The sampler
+//! lives in [`crate::diffusion`], the build's corrector in [`crate::correction::unet`], training and
+//! evaluation in [`crate::training`] (which depends on this module, never the other way).
 //!
-//! Layout (one layer per file, inference apart from training, so pipeline stages depend only on the
-//! inference modules):
+//! Layout (one layer per file):
 //! - layers: [`ws_conv`] (weight-standardised conv), [`norm`] (channel LayerNorm), [`resnet`] (Block and
 //!   ResnetBlock with optional FiLM), [`attention`] (linear and full attention, pre-norm residual);
 //! - models: [`unet`] (the skeleton of reference §4.1 / §5.1 with its presets), [`augment`]
-//!   (DepthAugment), [`correction`] (`CorrectionNet` and the [`crate::correction::Corrector`] wrapper),
-//!   [`denoiser`] (the diffusion U-Net with time and intrinsics FiLM conditioning);
-//! - I/O: [`checkpoint`] (safetensors with the config in the header metadata; the authors' key layout);
-//! - training and evaluation: [`data`] (label shards to tensors), [`metrics`], [`train`], [`evaluate`].
+//!   (DepthAugment), [`correction`] (`CorrectionNet`), [`denoiser`] (the diffusion U-Net with time and
+//!   intrinsics FiLM conditioning);
+//! - [`space`]: metric depth ↔ network values (`z/10`, `2·z/10 − 1`), the one place for those formulas;
+//! - I/O: [`checkpoint`] (safetensors with the config in the header metadata; the authors' key layout),
+//!   [`model_path`].
 //!
 //! Variable names follow the authors' PyTorch state-dict keys (`init_conv.weight`,
 //! `downs.0.0.block1.proj.weight`, ..., `final_conv.0.weight`), so a converted `model-best.pt` loads
@@ -20,21 +21,18 @@ pub mod attention;
 pub mod augment;
 pub mod checkpoint;
 pub mod correction;
-pub mod data;
 pub mod denoiser;
-pub mod evaluate;
 pub mod init;
-pub mod metrics;
 pub mod model_path;
 pub mod norm;
 pub mod resnet;
-pub mod train;
+pub mod space;
 pub mod unet;
 pub mod ws_conv;
 
 pub use augment::depth_augment;
 pub use checkpoint::{load_correction, save_correction, CheckpointMeta};
-pub use correction::{CorrectionNet, CorrectionNetConfig, UnetCorrector};
+pub use correction::{CorrectionNet, CorrectionNetConfig};
 pub use model_path::ModelPath;
 pub use unet::{Preset, Unet, UnetConfig};
 

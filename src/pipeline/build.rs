@@ -1,23 +1,20 @@
 //! Assembles the stages of a build from its config and runs them over the units this worker owns.
 
-use super::catalog::{check_worker, plan_shards, shard_count, shard_units, Catalog};
 use super::config::BuildConfig;
 use crate::error::Result;
 use crate::inpainting::InpaintConfig;
 use crate::rng::unit_seed;
 use crate::runtime::{run_pipeline, CancelToken, RunSummary, StageSpec};
 use crate::shards::dataset::Dataset;
+use crate::shards::plan::{check_worker, plan_shards, shard_count, shard_units};
 use crate::shards::CODE_VERSION;
-use crate::stages::correct::{Correct, Target};
+use crate::sources::Catalog;
+use crate::stages::correct::Target;
 use crate::stages::ingest::Ingest;
 use crate::stages::inpaint::Inpaint;
 use crate::stages::pack::Pack;
-use crate::stages::pose::PoseSampling;
 use crate::stages::reproject::Reproject;
 use crate::stages::sink::ShardSink;
-use crate::stages::successive::Successive;
-use crate::stages::validate::ValidateOverlap;
-use crate::stages::voxelize::Voxelize;
 use crate::stages::PairUnit;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -56,7 +53,7 @@ pub struct BuildReport {
 pub fn run_build(config: &BuildConfig, opts: &BuildOptions, cancel: &CancelToken) -> Result<BuildReport> {
     config.validate()?;
     check_worker(opts.worker, opts.workers)?;
-    let catalog = Arc::new(Catalog::open(config)?);
+    let catalog = Arc::new(Catalog::open(&config.source, &config.select, config.samples_per_frame)?);
     let total_units = catalog.units();
     let total_shards = shard_count(config.shard_size, total_units);
     let dataset = Dataset::create_or_open(&opts.out, &config.to_toml(), &config.dataset_hash())?
@@ -113,32 +110,21 @@ fn build_stages(config: &BuildConfig, catalog: Arc<Catalog>, strict: bool, threa
     .into_iter();
     let mut stages = vec![
         StageSpec::replicated(n, || Ingest { catalog: catalog.clone(), working: w.clone(), strict }),
-        StageSpec::replicated(n, || PoseSampling {
-            sampler: config.pose.pivot_sampler(),
-            target: config.pose.target.clone(),
-            depth_range: w.depth_range(),
-            crop_box: w.crop_box,
-        }),
+        StageSpec::replicated(n, || config.pose.build(w.depth_range(), w.crop_box)),
         StageSpec::replicated(n, || Reproject),
-        StageSpec::replicated(n, || Correct { target: Target::Condition, corrector: config.correct.condition.build() }),
+        StageSpec::replicated(n, || config.correct.build(Target::Condition)),
         StageSpec::replicated(n, || Inpaint { inpainter: inpainters.next().expect("one inpainter per worker") }),
-        StageSpec::replicated(n, || Correct { target: Target::Output, corrector: config.correct.output.build() }),
+        StageSpec::replicated(n, || config.correct.build(Target::Output)),
     ];
     if !sv.is_off() {
-        stages.push(StageSpec::replicated(n, || Successive {
-            views: sv.views,
-            memory_voxel: sv.memory_voxel,
-            sampler: config.pose.pivot_sampler(),
-            condition: config.correct.condition.build(),
-            inpainter: successive_inpainters.next().expect("one inpainter per worker"),
-            output: config.correct.output.build(),
-            depth_range: w.depth_range(),
-            crop_box: w.crop_box,
+        stages.push(StageSpec::replicated(n, || {
+            let inpainter = successive_inpainters.next().expect("one inpainter per worker");
+            sv.build(&config.pose, &config.correct, inpainter, w)
         }));
     }
     stages.extend([
-        StageSpec::replicated(n, || Voxelize { voxel: config.voxelize.voxel, min_points: config.voxelize.min_points, depth_range: w.depth_range(), crop_box: w.crop_box }),
-        StageSpec::replicated(n, || ValidateOverlap { config: config.validate.clone() }),
+        StageSpec::replicated(n, || config.voxelize.build(w)),
+        StageSpec::replicated(n, || config.validate.build()),
         StageSpec::replicated(n, || Pack {
             config_hash: config.content_hash(),
             code_version: CODE_VERSION.to_string(),

@@ -1,8 +1,7 @@
-//! The build pipeline: its configuration, the frame catalog and work units, and the assembly of the
-//! stages into a run over a dataset folder.
+//! The build pipeline: its top-level configuration and the assembly of the stages into a run over a
+//! dataset folder.
 
 pub mod build;
-pub mod catalog;
 pub mod config;
 pub mod overrides;
 

@@ -9,7 +9,8 @@ pub mod montage;
 pub mod stats;
 
 use crate::error::{Error, Result};
-use crate::export::rows::{committed_row_count, for_each_row, progress_bar, unique_name};
+use crate::export::rows::{committed_row_count, for_each_row, unique_name};
+use crate::runtime::progress::bar as progress_bar;
 use crate::export::Filter;
 use crate::shards::dataset::Dataset;
 pub use montage::{montage_size, render_pair};

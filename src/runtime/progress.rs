@@ -1,4 +1,6 @@
-//! Progress bars: one per stage with its rate, drawn on stderr only when it is a terminal.
+//! Progress bars, in one style: one per stage of a pipeline run with its rate ([`Progress`]), and single
+//! bars over rows, frames or steps for the commands that read datasets, train and evaluate ([`bar`]).
+//! Drawn on stderr only when asked and when it is a terminal.
 
 use super::metrics::StageMetrics;
 use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -16,11 +18,8 @@ impl Progress {
     /// Bars for `names`, each out of `total` items. Hidden when `visible` is false or stderr is not a
     /// terminal.
     pub fn new(names: &[&'static str], metrics: &[Arc<StageMetrics>], total: u64, visible: bool) -> Self {
-        let target = if visible { ProgressDrawTarget::stderr_with_hz(4) } else { ProgressDrawTarget::hidden() };
-        let multi = MultiProgress::with_draw_target(target);
-        let style = ProgressStyle::with_template("{prefix:>16} {bar:30} {pos:>7}/{len:7} {per_sec:>10} {msg}")
-            .expect("valid template")
-            .progress_chars("=> ");
+        let multi = MultiProgress::with_draw_target(draw_target(visible));
+        let style = style();
         let bars = names
             .iter()
             .zip(metrics)
@@ -54,4 +53,25 @@ impl Progress {
 
     /// How often the ticker refreshes.
     pub const TICK: Duration = Duration::from_millis(250);
+}
+
+/// The one bar style: label, bar, count, rate, message.
+fn style() -> ProgressStyle {
+    ProgressStyle::with_template("{prefix:>16} {bar:30} {pos:>7}/{len:7} {per_sec:>10} {msg}")
+        .expect("valid template")
+        .progress_chars("=> ")
+}
+
+/// stderr at 4 Hz when `visible` (indicatif draws nothing when stderr is not a terminal), else hidden.
+fn draw_target(visible: bool) -> ProgressDrawTarget {
+    if visible {
+        ProgressDrawTarget::stderr_with_hz(4)
+    } else {
+        ProgressDrawTarget::hidden()
+    }
+}
+
+/// A bar over `total` items labelled `label`, drawn only when `visible` and stderr is a terminal.
+pub fn bar(total: u64, visible: bool, label: &str) -> ProgressBar {
+    ProgressBar::with_draw_target(Some(total), draw_target(visible)).with_style(style()).with_prefix(label.to_string())
 }

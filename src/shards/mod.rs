@@ -38,6 +38,7 @@ pub mod dataset;
 pub mod labels;
 pub mod manifest;
 pub mod pairs;
+pub mod plan;
 pub mod parquet_io;
 pub mod row;
 pub mod schema;

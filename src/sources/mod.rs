@@ -3,6 +3,7 @@
 //! Every reader lists a sequence's frames as [`FrameRef`]s without decoding them; [`FrameRef::load`]
 //! decodes one frame into a [`Frame`]. Errors name the file and the problem.
 
+pub mod catalog;
 pub mod depth_png;
 pub mod ply;
 pub mod scannet;
@@ -15,6 +16,8 @@ use crate::error::{Error, Result};
 use crate::geometry::{DepthMap, Intrinsics};
 use nalgebra::Isometry3;
 use std::path::{Path, PathBuf};
+
+pub use catalog::{Catalog, SelectConfig, SourceConfig};
 
 /// Raw depth values that mean "no measurement" in 3DMatch / 7-Scenes / SUN3D / ScanNet PNGs.
 pub const INVALID_RAW_DEPTH: [u16; 2] = [0, 65535];

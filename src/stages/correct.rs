@@ -1,10 +1,44 @@
-//! Correct: drop penetrating pixels, on the condition (before inpainting) or on the output (after).
+//! Correct: drop penetrating pixels, on the condition (before inpainting) or on the output (after); and
+//! the `[correct]` config section naming the method for each.
 
 use super::PairUnit;
-use crate::correction::{apply_keep_mask, Corrector};
+use crate::correction::{apply_keep_mask, CorrectionConfig, Corrector};
 use crate::error::Result;
 use crate::geometry::DepthMap;
 use crate::runtime::Stage;
+use serde::{Deserialize, Serialize};
+
+/// The correction applied to the condition (before inpainting) and to the output (after).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct CorrectConfig {
+    pub condition: CorrectionConfig,
+    pub output: CorrectionConfig,
+}
+
+impl Default for CorrectConfig {
+    fn default() -> Self {
+        let official = CorrectionConfig::OFFICIAL_MIN_POOL;
+        CorrectConfig { condition: official, output: official }
+    }
+}
+
+impl CorrectConfig {
+    /// Checks both methods (loading U-Net checkpoints); errors name `correct.condition` or `correct.output`.
+    pub fn validate(&self) -> Result<()> {
+        self.condition.validate("correct.condition")?;
+        self.output.validate("correct.output")
+    }
+
+    /// The stage correcting `target` (call [`Self::validate`] first).
+    pub fn build(&self, target: Target) -> Correct {
+        let method = match target {
+            Target::Condition => &self.condition,
+            Target::Output => &self.output,
+        };
+        Correct { target, corrector: method.build() }
+    }
+}
 
 /// Which map a correction stage works on.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

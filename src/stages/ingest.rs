@@ -1,13 +1,85 @@
-//! Ingest: decode the unit's frame, map it to the working resolution, back-project the scene memory.
+//! Ingest: decode the unit's frame, map it to the working resolution, back-project the scene memory; and
+//! the `[working]` config section (resolution, intrinsics map, depth range, crop box) that every later
+//! stage also reads.
 
 use super::PairUnit;
 use crate::error::{Error, Result};
-use crate::geometry::backproject;
-use crate::pipeline::catalog::Catalog;
-use crate::pipeline::config::WorkingConfig;
+use crate::geometry::{backproject, AxisBox, DepthMap, DepthRange, Intrinsics, ResizeCrop};
 use crate::runtime::Stage;
 use crate::shards::row::Status;
+use crate::sources::{Catalog, Frame};
+use serde::{Deserialize, Serialize};
 use std::sync::Arc;
+
+/// How intrinsics follow the resize-and-crop.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum IntrinsicsMap {
+    /// The official map: principal point assumed at the image centre (`cx' = W'/2 − left`).
+    Official,
+    /// Exact pixel-centre scaling of the stored principal point.
+    Exact,
+}
+
+/// Working resolution and the region of space that becomes points.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct WorkingConfig {
+    /// Side of the square working image, pixels (official 256: shorter side resized, centre crop).
+    pub size: u32,
+    /// How intrinsics follow the resize and crop.
+    pub intrinsics: IntrinsicsMap,
+    /// Depths kept when back-projecting, metres, open interval (official 0.5–10).
+    pub depth_range: [f32; 2],
+    /// Crop box in each camera's own frame, metres (official x, y ±1.5, z 0.5–3.5).
+    pub crop_box: AxisBox,
+}
+
+impl Default for WorkingConfig {
+    fn default() -> Self {
+        WorkingConfig { size: 256, intrinsics: IntrinsicsMap::Official, depth_range: [0.5, 10.0], crop_box: AxisBox::OFFICIAL }
+    }
+}
+
+impl WorkingConfig {
+    pub fn depth_range(&self) -> DepthRange {
+        DepthRange { near: self.depth_range[0], far: self.depth_range[1] }
+    }
+
+    /// The official resize and centre crop of an image with intrinsics `k0`, and the intrinsics at the
+    /// working resolution, mapped as `intrinsics` says.
+    pub fn map_intrinsics(&self, k0: &Intrinsics) -> Result<(ResizeCrop, Intrinsics)> {
+        let rc = ResizeCrop::official(k0.width, k0.height, self.size)?;
+        let k = match self.intrinsics {
+            IntrinsicsMap::Official => rc.official_intrinsics(k0)?,
+            IntrinsicsMap::Exact => rc.exact_intrinsics(k0)?,
+        };
+        Ok((rc, k))
+    }
+
+    /// A frame's depth and intrinsics at the working resolution ([`Self::map_intrinsics`]).
+    pub fn map_frame(&self, frame: &Frame) -> Result<(DepthMap, Intrinsics)> {
+        let (rc, k) = self.map_intrinsics(&frame.intrinsics)?;
+        Ok((frame.depth.resize_crop(&rc)?, k))
+    }
+
+    /// Checks ranges; errors name the key under `working`.
+    pub fn validate(&self) -> Result<()> {
+        let bad = |k: &str, m: &str| Err(Error::config(k, m));
+        if self.size < 16 || self.size > 4096 {
+            return bad("working.size", "must be 16..=4096 pixels");
+        }
+        let [near, far] = self.depth_range;
+        if !(near >= 0.0 && far > near && far.is_finite()) {
+            return bad("working.depth_range", "must be [near, far] metres with 0 <= near < far");
+        }
+        let b = &self.crop_box;
+        if (0..3).any(|a| !(b.min[a] < b.max[a]) || !b.min[a].is_finite() || !b.max[a].is_finite()) {
+            return bad("working.crop_box", "min must be below max on every axis");
+        }
+        Ok(())
+    }
+}
 
 /// Decodes frames; bad input becomes an `input_error` unit (or a fatal error under `--strict`).
 pub struct Ingest {

@@ -1,4 +1,5 @@
-//! Pack: turn a finished unit (accepted or rejected) into its shard row, encoding the depth maps.
+//! Pack: turn a finished unit (accepted or rejected) into its shard row, encoding the depth maps; and the
+//! `[output]` config section.
 
 use super::PairUnit;
 use crate::error::Result;
@@ -6,6 +7,21 @@ use crate::geometry::{pose_to_rows, DepthMap};
 use crate::runtime::Stage;
 use crate::shards::row::PairRow;
 use crate::sources::depth_png::encode_depth_png;
+use serde::{Deserialize, Serialize};
+
+/// What each row stores besides the clouds.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct OutputConfig {
+    /// Store the source, condition and target depth maps and the known mask as PNG bytes.
+    pub depth_maps: bool,
+}
+
+impl Default for OutputConfig {
+    fn default() -> Self {
+        OutputConfig { depth_maps: true }
+    }
+}
 
 /// Row-level provenance shared by every row of a build.
 pub struct Pack {

@@ -1,12 +1,109 @@
-//! Pose sampling: the official pivot sampler, optionally redrawn towards a target overlap histogram.
+//! Pose sampling: the official pivot sampler, optionally redrawn towards a target overlap histogram; and
+//! its `[pose]` config section.
 
 use super::{streams, PairUnit};
-use crate::error::Result;
-use crate::geometry::{AxisBox, DepthRange, Intrinsics, PivotPoseSampler, Point};
-use crate::pipeline::config::OverlapTarget;
+use crate::error::{Error, Result};
+use crate::geometry::{coverage, AxisBox, DepthRange, Intrinsics, PivotPoseSampler, Point};
 use crate::rng::Rng;
 use crate::runtime::Stage;
 use nalgebra::Isometry3;
+use serde::{Deserialize, Serialize};
+
+/// Every how-many-th memory point the coverage estimate of [`sample_towards_bin`] looks at.
+pub const COVERAGE_STRIDE: usize = 16;
+
+/// Pose sampling: the official pivot sampler, optionally steered towards a target overlap histogram.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct PoseConfig {
+    /// Largest rotation about the camera x axis, degrees (official 7.5).
+    pub max_pitch_deg: f64,
+    /// Largest rotation about the camera y axis, degrees (official 15).
+    pub max_yaw_deg: f64,
+    /// Distance of the pivot ahead of the source camera, metres (official 3).
+    pub pivot_distance: f64,
+    /// Standard deviation of the lateral x/y jitter, metres (official 1/3).
+    pub lateral_sigma: f64,
+    /// When set, redraw poses until the cheap coverage estimate falls in the bin assigned to the unit.
+    pub target: Option<OverlapTarget>,
+}
+
+impl Default for PoseConfig {
+    fn default() -> Self {
+        let p = PivotPoseSampler::default();
+        PoseConfig {
+            max_pitch_deg: p.max_pitch.to_degrees(),
+            max_yaw_deg: p.max_yaw.to_degrees(),
+            pivot_distance: p.pivot_distance,
+            lateral_sigma: p.lateral_sigma,
+            target: None,
+        }
+    }
+}
+
+/// A target overlap histogram: each unit is assigned a bin (by its seed, with the given weights), and
+/// poses are redrawn until the estimated overlap falls in that bin.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OverlapTarget {
+    /// Bin edges of the overlap ratio, increasing, in [0, 1] (e.g. [0.1, 0.3, 1.0] for 3DLoMatch + 3DMatch).
+    pub bin_edges: Vec<f64>,
+    /// Relative share of pairs wanted in each bin (one fewer than the edges).
+    pub weights: Vec<f64>,
+    /// Most poses drawn per unit; the closest draw is kept when none lands in the bin.
+    #[serde(default = "default_max_draws")]
+    pub max_draws: u32,
+}
+
+fn default_max_draws() -> u32 {
+    32
+}
+
+impl PoseConfig {
+    pub fn pivot_sampler(&self) -> PivotPoseSampler {
+        PivotPoseSampler {
+            max_pitch: self.max_pitch_deg.to_radians(),
+            max_yaw: self.max_yaw_deg.to_radians(),
+            pivot_distance: self.pivot_distance,
+            lateral_sigma: self.lateral_sigma,
+        }
+    }
+
+    /// Checks ranges; errors name the key under `pose`.
+    pub fn validate(&self) -> Result<()> {
+        let bad = |k: &str, m: &str| Err(Error::config(k, m));
+        for (k, v) in [("pose.max_pitch_deg", self.max_pitch_deg), ("pose.max_yaw_deg", self.max_yaw_deg)] {
+            if !(0.0..=90.0).contains(&v) {
+                return bad(k, "must be 0..=90 degrees");
+            }
+        }
+        if !(self.pivot_distance.is_finite() && self.pivot_distance >= 0.0 && self.pivot_distance < 100.0) {
+            return bad("pose.pivot_distance", "must be 0..100 metres");
+        }
+        if !(self.lateral_sigma.is_finite() && self.lateral_sigma >= 0.0 && self.lateral_sigma < 10.0) {
+            return bad("pose.lateral_sigma", "must be 0..10 metres");
+        }
+        if let Some(t) = &self.target {
+            let e = &t.bin_edges;
+            if e.len() < 2 || e.windows(2).any(|w| !(w[0] < w[1])) || e[0] < 0.0 || e[e.len() - 1] > 1.0 {
+                return bad("pose.target.bin_edges", "must be at least two increasing values in [0, 1]");
+            }
+            let w = &t.weights;
+            if w.len() != e.len() - 1 || w.iter().any(|w| !(*w >= 0.0 && w.is_finite())) || w.iter().sum::<f64>() <= 0.0 {
+                return bad("pose.target.weights", "needs one non-negative weight per bin (edges - 1), not all zero");
+            }
+            if t.max_draws == 0 || t.max_draws > 10_000 {
+                return bad("pose.target.max_draws", "must be 1..=10000");
+            }
+        }
+        Ok(())
+    }
+
+    /// The stage; coverage estimates use the working depth range and crop box.
+    pub fn build(&self, depth_range: DepthRange, crop_box: AxisBox) -> PoseSampling {
+        PoseSampling { sampler: self.pivot_sampler(), target: self.target.clone(), depth_range, crop_box }
+    }
+}
 
 /// Draws `T_target_from_source` from the unit's seed.
 pub struct PoseSampling {
@@ -36,8 +133,9 @@ impl Stage<PairUnit> for PoseSampling {
     }
 }
 
-/// Picks the unit's bin (weighted by `target.weights`), then draws poses until [`coverage`] falls in it;
-/// after `max_draws` keeps the draw closest to the bin. Returns the pose and the number of draws.
+/// Picks the unit's bin (weighted by `target.weights`), then draws poses until the coverage of `memory`
+/// ([`coverage`] of every [`COVERAGE_STRIDE`]-th point) falls in it; after `max_draws` keeps the draw
+/// closest to the bin. Returns the pose and the number of draws.
 pub fn sample_towards_bin(
     sampler: &PivotPoseSampler,
     target: &OverlapTarget,
@@ -61,7 +159,7 @@ pub fn sample_towards_bin(
     let mut best = (f64::INFINITY, Isometry3::identity());
     for draw in 1..=target.max_draws {
         let pose = sampler.sample(rng);
-        let c = coverage(memory, &pose, k, range, crop_box);
+        let c = coverage(memory, &pose, k, range, crop_box, COVERAGE_STRIDE);
         if c >= lo && c < hi {
             return (pose, draw);
         }
@@ -71,30 +169,6 @@ pub fn sample_towards_bin(
         }
     }
     (best.1, target.max_draws)
-}
-
-/// Cheap overlap estimate: the fraction of (every 16th) memory point that lands inside the target
-/// image, inside the depth range and inside the target's crop box.
-pub fn coverage(memory: &[Point], t_target_from_source: &Isometry3<f64>, k: &Intrinsics, range: DepthRange, crop_box: &AxisBox) -> f64 {
-    let (mut seen, mut total) = (0usize, 0usize);
-    for p in memory.iter().step_by(16) {
-        total += 1;
-        let q = t_target_from_source * nalgebra::Point3::new(p.x as f64, p.y as f64, p.z as f64);
-        let qf = Point::new(q.x as f32, q.y as f32, q.z as f32);
-        if !range.contains(qf.z) || !crop_box.contains(&qf) {
-            continue;
-        }
-        let u = (q.x * k.fx / q.z + k.cx).round_ties_even();
-        let v = (q.y * k.fy / q.z + k.cy).round_ties_even();
-        if u >= 0.0 && v >= 0.0 && u < k.width as f64 && v < k.height as f64 {
-            seen += 1;
-        }
-    }
-    if total == 0 {
-        0.0
-    } else {
-        seen as f64 / total as f64
-    }
 }
 
 #[cfg(test)]
@@ -112,12 +186,25 @@ mod tests {
         for s in 0..400u64 {
             let mut rng = Rng::new(s);
             let (pose, draws) = sample_towards_bin(&sampler, &target, &memory, &k, DepthRange::OFFICIAL, &AxisBox::OFFICIAL, &mut rng);
-            let c = coverage(&memory, &pose, &k, DepthRange::OFFICIAL, &AxisBox::OFFICIAL);
+            let c = coverage(&memory, &pose, &k, DepthRange::OFFICIAL, &AxisBox::OFFICIAL, COVERAGE_STRIDE);
             assert!(draws < 200, "unit {s} never reached its bin");
             assert!((0.1..0.9).contains(&c));
             counts[if c < 0.5 { 0 } else { 1 }] += 1;
         }
         let share = counts[1] as f64 / 400.0;
         assert!((share - 0.75).abs() < 0.07, "bin shares {counts:?}");
+    }
+
+    #[test]
+    fn bad_targets_are_refused_naming_the_key() {
+        let mut c = PoseConfig::default();
+        c.validate().unwrap();
+        c.target = Some(OverlapTarget { bin_edges: vec![0.5, 0.2], weights: vec![1.0], max_draws: 4 });
+        assert!(c.validate().unwrap_err().to_string().contains("pose.target.bin_edges"));
+        c.target = Some(OverlapTarget { bin_edges: vec![0.1, 0.3, 1.0], weights: vec![1.0], max_draws: 4 });
+        assert!(c.validate().unwrap_err().to_string().contains("pose.target.weights"));
+        c.target = None;
+        c.max_yaw_deg = 120.0;
+        assert!(c.validate().unwrap_err().to_string().contains("pose.max_yaw_deg"));
     }
 }

@@ -28,7 +28,7 @@ impl<'a> ShardSink<'a> {
     }
 
     fn expected(&self, shard: u64) -> u64 {
-        let (a, b) = crate::pipeline::catalog::shard_units(shard, self.shard_size, self.total_units);
+        let (a, b) = crate::shards::plan::shard_units(shard, self.shard_size, self.total_units);
         b - a
     }
 }
@@ -46,7 +46,7 @@ impl Sink<PairUnit> for ShardSink<'_> {
         if buf.len() as u64 == self.expected(shard) {
             let mut rows = self.buffers.remove(&shard).expect("buffer exists");
             rows.sort_by_key(|r| r.unit_index);
-            let (first, end) = crate::pipeline::catalog::shard_units(shard, self.shard_size, self.total_units);
+            let (first, end) = crate::shards::plan::shard_units(shard, self.shard_size, self.total_units);
             self.dataset.commit_pairs(shard, first, end - first, &rows)?;
             for r in &rows {
                 *self.rows_by_status.entry(r.status.as_str().to_string()).or_default() += 1;

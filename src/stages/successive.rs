@@ -1,12 +1,14 @@
 //! Successive views (reference §3.3, `num_samples > 1`): after the first target view, draw more views, each
 //! re-projected from a scene memory that grows with the views generated so far, and fuse them all into the
-//! pair's target cloud.
+//! pair's target cloud; and the `[successive]` config section.
 
-use super::correct::{correct_condition, correct_output};
+use super::correct::{correct_condition, correct_output, CorrectConfig};
+use super::ingest::WorkingConfig;
+use super::pose::PoseConfig;
 use super::inpaint::noise_seed;
 use super::{streams, PairUnit};
 use crate::correction::Corrector;
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::geometry::{
     backproject, project_zbuffer, transform_points, voxel_downsample, AxisBox, DepthMap, DepthRange, Intrinsics,
     PivotPoseSampler, Point,
@@ -15,6 +17,57 @@ use crate::inpainting::{InpaintContext, Inpainter};
 use crate::rng::Rng;
 use crate::runtime::Stage;
 use nalgebra::Isometry3;
+use serde::{Deserialize, Serialize};
+
+/// The official `num_samples > 1` generation (reference §2, §3.3): the pair's target is several views at
+/// independently drawn poses (each relative to the source camera); every view is re-projected from a scene
+/// memory that holds the source points and the views generated so far (voxel-downsampled), corrected and
+/// inpainted like the first, and the views are fused into one target cloud in the first view's camera.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SuccessiveConfig {
+    /// Target views fused into the target cloud (1 = off, one view per pair).
+    pub views: u32,
+    /// Voxel of the scene memory after each view is added, metres (official `memory_voxel_size` 0.002).
+    pub memory_voxel: f32,
+}
+
+impl Default for SuccessiveConfig {
+    fn default() -> Self {
+        SuccessiveConfig { views: 1, memory_voxel: 0.002 }
+    }
+}
+
+impl SuccessiveConfig {
+    pub fn is_off(&self) -> bool {
+        self.views <= 1
+    }
+
+    /// Checks ranges; errors name the key under `successive`.
+    pub fn validate(&self) -> Result<()> {
+        if self.views == 0 || self.views > 64 {
+            return Err(Error::config("successive.views", "must be 1..=64"));
+        }
+        if !(self.memory_voxel.is_finite() && self.memory_voxel >= 0.0005 && self.memory_voxel <= 0.1) {
+            return Err(Error::config("successive.memory_voxel", "must be 0.0005..=0.1 metres"));
+        }
+        Ok(())
+    }
+
+    /// The stage: views drawn by the `pose` sampler, corrected as `correct` says, filled by `inpainter`.
+    pub fn build(&self, pose: &PoseConfig, correct: &CorrectConfig, inpainter: Box<dyn Inpainter>, working: &WorkingConfig) -> Successive {
+        Successive {
+            views: self.views,
+            memory_voxel: self.memory_voxel,
+            sampler: pose.pivot_sampler(),
+            condition: correct.condition.build(),
+            inpainter,
+            output: correct.output.build(),
+            depth_range: working.depth_range(),
+            crop_box: working.crop_box,
+        }
+    }
+}
 
 /// Views 2..=`views` of each unit; the first came through the single-view stages.
 pub struct Successive {

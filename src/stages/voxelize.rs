@@ -1,10 +1,44 @@
-//! Voxelize: both clouds cropped to the box in their own camera frames and voxel-downsampled.
+//! Voxelize: both clouds cropped to the box in their own camera frames and voxel-downsampled; and the
+//! `[voxelize]` config section.
 
+use super::ingest::WorkingConfig;
 use super::PairUnit;
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::geometry::{backproject, voxel_downsample, AxisBox, DepthRange};
 use crate::runtime::Stage;
 use crate::shards::row::Status;
+use serde::{Deserialize, Serialize};
+
+/// Voxelization of both clouds (each in its own camera frame, after the crop box).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct VoxelizeConfig {
+    /// Voxel edge, metres (official 0.025).
+    pub voxel: f32,
+    /// A pair is rejected (`too_few_points`) when either cloud has fewer points (official 1000).
+    pub min_points: usize,
+}
+
+impl Default for VoxelizeConfig {
+    fn default() -> Self {
+        VoxelizeConfig { voxel: 0.025, min_points: 1000 }
+    }
+}
+
+impl VoxelizeConfig {
+    /// Checks ranges; errors name the key under `voxelize`.
+    pub fn validate(&self) -> Result<()> {
+        if !(self.voxel.is_finite() && self.voxel >= 0.001 && self.voxel <= 1.0) {
+            return Err(Error::config("voxelize.voxel", "must be 0.001..=1 metres"));
+        }
+        Ok(())
+    }
+
+    /// The stage; clouds are cut to the working depth range and crop box first.
+    pub fn build(&self, working: &WorkingConfig) -> Voxelize {
+        Voxelize { voxel: self.voxel, min_points: self.min_points, depth_range: working.depth_range(), crop_box: working.crop_box }
+    }
+}
 
 pub struct Voxelize {
     pub voxel: f32,

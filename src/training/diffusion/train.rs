@@ -6,9 +6,9 @@
 //! seed and `s` alone (batch, crops, flips from [`Rng`], time steps and noise from libtorch's generator
 //! reseeded per step), so a resumed run equals an uninterrupted one.
 
-use super::checkpoint::{self, sorted_variables, DiffusionMeta, Named, EMA, ONLINE};
 use super::data::FrameSet;
-use super::schedule::Schedule;
+use crate::diffusion::checkpoint::{self, sorted_variables, DiffusionMeta, Named, EMA, ONLINE};
+use crate::diffusion::schedule::Schedule;
 use crate::correction::{CorrectionConfig, Corrector};
 use crate::error::{Error, Result};
 use crate::geometry::PivotPoseSampler;
@@ -396,7 +396,7 @@ pub fn train_diffusion(data: &FrameSet, opts: &DiffusionTrainOptions, mut on_rep
     };
     let log_path = opts.out.join(LOSS_LOG);
     let mut log = std::fs::OpenOptions::new().create(true).append(true).open(&log_path).map_err(|e| Error::io(&log_path, e))?;
-    let bar = crate::export::rows::progress_bar(opts.steps, opts.progress, "step");
+    let bar = crate::runtime::progress::bar(opts.steps, opts.progress, "step");
     bar.set_position(start);
     let t0 = std::time::Instant::now();
     let (mut sum, mut count, mut last_loss) = (0f64, 0u64, f64::NAN);

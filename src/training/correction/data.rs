@@ -1,7 +1,7 @@
 //! Label shards as in-memory training examples: the sparse re-projection `I_s` (network input), the
 //! dense `I_d` and the keep label `M_gt`.
 
-use super::correction::normalise_depth;
+use crate::nn::space::normalise_depth;
 use crate::error::{Error, Result};
 use crate::shards::dataset::Dataset;
 use crate::shards::labels::{batch_to_labels, LABELS_TABLE};

@@ -9,11 +9,10 @@
 //! round trip's depth. A corrector then drops pixels as the build's `[correct.condition]` does, and
 //! push–pull fills the unknown pixels as the sampler's start does.
 
-use super::data::{from_network, to_network};
 use crate::correction::{apply_keep_mask, Corrector};
 use crate::geometry::{backproject, project_zbuffer, DepthMap, DepthRange, Intrinsics, PivotPoseSampler};
 use crate::inpainting::{InpaintContext, Inpainter, PushPull};
-use crate::nn::correction::DEPTH_SCALE_M;
+use crate::nn::space::{from_network, to_network, DEPTH_SCALE_M};
 use crate::rng::Rng;
 use nalgebra::Isometry3;
 

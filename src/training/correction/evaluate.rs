@@ -1,7 +1,7 @@
 //! Evaluation of keep masks on held-out labels: handcrafted filters and U-Net checkpoints, at τ_m 0.5 and
 //! 0.99, over the pixels that have input depth; a printed table and CSV.
 
-use super::correction::{keep_probabilities, CorrectionNet};
+use crate::nn::correction::{keep_probabilities, CorrectionNet};
 use super::data::LabelSet;
 use super::metrics::{Confusion, MaskMetrics};
 use crate::correction::{Corrector, MedianFilter, MinPoolFilter};
@@ -42,7 +42,7 @@ pub fn evaluate_corrector(corrector: &dyn Corrector, set: &LabelSet) -> Result<C
     let mut c = Confusion::default();
     for e in &set.examples {
         let input = e.input();
-        let metres: Vec<f32> = input.iter().map(|x| x * super::correction::DEPTH_SCALE_M).collect();
+        let metres: Vec<f32> = input.iter().map(|x| x * crate::nn::space::DEPTH_SCALE_M).collect();
         let depth = DepthMap::new(set.width as u32, set.height as u32, metres)?;
         let keep = corrector.keep_mask(&depth);
         c.add(|i| input[i] > 0.0, &e.sparse, &e.dense, &e.keep, &keep);
@@ -87,7 +87,7 @@ pub fn checkpoint_rows(
     batch: usize,
     thresholds: &[f32],
 ) -> Result<Vec<EvalRow>> {
-    let (_vs, net, _) = super::checkpoint::load_correction(path, device)?;
+    let (_vs, net, _) = crate::nn::checkpoint::load_correction(path, device)?;
     let confusions = evaluate_net(&net, device, set, batch, thresholds);
     Ok(thresholds
         .iter()

@@ -11,7 +11,7 @@ use crate::correction::{apply_keep_mask, Corrector};
 use crate::error::{Error, Result};
 use crate::geometry::{backproject, project_zbuffer, DepthMap, Intrinsics};
 use crate::inpainting::{InpaintContext, Inpainter};
-use crate::pipeline::config::WorkingConfig;
+use crate::stages::ingest::WorkingConfig;
 use crate::sources::Frame;
 use serde::Serialize;
 

@@ -2,24 +2,10 @@
 //! working resolution exactly as the build's ingest does, in network space.
 
 use crate::error::{Error, Result};
-use crate::nn::correction::normalise_depth;
-use crate::pipeline::catalog::Catalog;
-use crate::pipeline::config::BuildConfig;
+use crate::nn::space::to_network;
+use crate::pipeline::BuildConfig;
+use crate::sources::Catalog;
 use std::path::{Path, PathBuf};
-
-/// Network value of a metric depth: `2·z/10 − 1`, with missing, non-finite and > 10 m as −1.
-pub fn to_network(z: f32) -> f32 {
-    2.0 * normalise_depth(z) - 1.0
-}
-
-/// Metric depth of a network value (the inverse of [`to_network`] on (−1, 1]; −1 and below is missing).
-pub fn from_network(v: f32) -> f32 {
-    if v > -1.0 {
-        (v + 1.0) * 0.5 * crate::nn::correction::DEPTH_SCALE_M
-    } else {
-        0.0
-    }
-}
 
 /// One training frame.
 #[derive(Clone, Debug)]
@@ -57,7 +43,7 @@ impl FrameSet {
         let mut set = FrameSet::default();
         for input in inputs {
             let config = data_config(input)?;
-            let catalog = Catalog::open(&config)?;
+            let catalog = Catalog::open(&config.source, &config.select, 1)?;
             let size = config.working.size as usize;
             if !set.frames.is_empty() && (set.width, set.height) != (size, size) {
                 return Err(Error::config(
@@ -66,7 +52,7 @@ impl FrameSet {
                 ));
             }
             (set.width, set.height) = (size, size);
-            let bar = crate::export::rows::progress_bar(catalog.frames.len() as u64, progress, "frames");
+            let bar = crate::runtime::progress::bar(catalog.frames.len() as u64, progress, "frames");
             for i in 0..catalog.frames.len() {
                 let frame = catalog.load(i)?;
                 let (depth, k) = config.working.map_frame(&frame)?;
@@ -91,21 +77,5 @@ impl FrameSet {
 
     pub fn is_empty(&self) -> bool {
         self.frames.is_empty()
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn network_space_round_trips_and_marks_missing_depth() {
-        for z in [0.5f32, 1.234, 3.0, 9.99] {
-            assert!((from_network(to_network(z)) - z).abs() < 1e-5);
-        }
-        for z in [0.0f32, -1.0, 11.0, f32::NAN] {
-            assert_eq!(to_network(z), -1.0);
-            assert_eq!(from_network(to_network(z)), 0.0);
-        }
     }
 }

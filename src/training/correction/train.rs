@@ -1,12 +1,12 @@
 //! The correction network's training loop (reference §4.2): BCE on the keep label, Adam, exponential LR
 //! decay per epoch, gradient-norm clipping, validation and checkpoints every epoch, resume.
 
-use super::checkpoint::{load_weights, read_meta, save_correction, CheckpointMeta};
-use super::correction::{CorrectionNet, CorrectionNetConfig};
+use crate::nn::checkpoint::{load_weights, read_meta, save_correction, CheckpointMeta};
+use crate::nn::correction::{CorrectionNet, CorrectionNetConfig};
 use super::data::LabelSet;
 use super::evaluate::{evaluate_net, THRESHOLDS};
 use super::metrics::MaskMetrics;
-use super::unet::Preset;
+use crate::nn::unet::Preset;
 use crate::error::{Error, Result};
 use crate::rng::Rng;
 use serde::Serialize;
@@ -205,7 +205,7 @@ pub fn train_correction(
     let config = CorrectionNetConfig::from_preset(opts.preset, opts.augment);
     let mut vs = nn::VarStore::new(opts.device);
     let net = CorrectionNet::new(&vs.root(), &config)?;
-    let parameters = super::unet::parameter_count(&vs);
+    let parameters = crate::nn::unet::parameter_count(&vs);
 
     let (mut start, mut lr, mut best) = (0u32, opts.lr, None::<f64>);
     let latest = opts.out.join(LATEST);
@@ -238,7 +238,7 @@ pub fn train_correction(
         for i in (1..order.len()).rev() {
             order.swap(i, rng.below(i as u64 + 1) as usize);
         }
-        let bar = crate::export::rows::progress_bar(steps, opts.progress, &format!("epoch {}", epoch + 1));
+        let bar = crate::runtime::progress::bar(steps, opts.progress, &format!("epoch {}", epoch + 1));
         let (mut sum, mut count) = (0f64, 0usize);
         for idx in order.chunks(opts.batch) {
             let (x, y, m) = make_batch(train, idx, opts, &mut rng);
@@ -278,7 +278,7 @@ pub fn train_correction(
         };
         lr *= opts.lr_gamma;
         let meta = CheckpointMeta {
-            format: super::checkpoint::FORMAT.into(),
+            format: crate::nn::checkpoint::FORMAT.into(),
             net: config.clone(),
             epoch: epoch + 1,
             best_metric_name: BEST_METRIC.into(),

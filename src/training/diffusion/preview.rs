@@ -1,10 +1,10 @@
 //! Sample previews during training: a strip of unconditional samples (nothing known), colour-mapped, so
 //! a training run can be looked at while it goes.
 
-use super::data::from_network;
-use super::model::X0Model;
-use super::sampler::{ddnm_sample, Problem, SamplerOptions};
-use super::schedule::Schedule;
+use crate::diffusion::model::X0Model;
+use crate::diffusion::sampler::{ddnm_sample, Problem, SamplerOptions};
+use crate::diffusion::schedule::Schedule;
+use crate::nn::space::from_network;
 use crate::error::Result;
 use crate::preview::canvas::Canvas;
 use crate::preview::colormap::turbo;

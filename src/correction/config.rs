@@ -1,0 +1,78 @@
+//! `CorrectionConfig`: the correction methods a pipeline config can name, their checks, and the corrector
+//! each builds.
+
+use super::{Corrector, MedianFilter, MinPoolFilter, NoCorrection, UnetCorrector};
+use serde::{Deserialize, Serialize};
+
+/// The correction methods a pipeline config can name.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "method", rename_all = "snake_case", deny_unknown_fields)]
+pub enum CorrectionConfig {
+    /// Keep every pixel.
+    None,
+    /// The official hand-crafted filter: drop a pixel at least `threshold` metres behind the nearest
+    /// valid depth of its 3×3 neighbourhood (official 0.0375 m).
+    MinPool { threshold: f32 },
+    /// Baseline: drop a pixel at least `threshold` metres behind the median valid depth of its
+    /// `window`×`window` neighbourhood.
+    Median { window: u32, threshold: f32 },
+    /// The trained correction U-Net (reference §4): drop a pixel whose keep probability is at most
+    /// `threshold` (τ_m, official 0.99). `checkpoint` is a safetensors file (`pointreggpt train
+    /// correction`, or the authors' converted weights), relative to the working directory; `preset`, when
+    /// given, must match the checkpoint's.
+    Unet {
+        checkpoint: crate::nn::ModelPath,
+        threshold: f32,
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        preset: Option<crate::nn::Preset>,
+    },
+}
+
+impl CorrectionConfig {
+    /// The official hand-crafted filter: min-pool at 3.75 cm (reference §3.3).
+    pub const OFFICIAL_MIN_POOL: CorrectionConfig = CorrectionConfig::MinPool { threshold: 0.0375 };
+
+    /// The model file this method reads, if any.
+    pub fn checkpoint(&self) -> Option<crate::nn::ModelPath> {
+        match self {
+            CorrectionConfig::Unet { checkpoint, .. } => Some(*checkpoint),
+            _ => None,
+        }
+    }
+
+    /// Checks parameter ranges; `field` names the config key in errors.
+    pub fn validate(&self, field: &str) -> crate::Result<()> {
+        let bad = |m: &str| Err(crate::Error::config(field, m));
+        match *self {
+            CorrectionConfig::None => Ok(()),
+            CorrectionConfig::MinPool { threshold } | CorrectionConfig::Median { threshold, .. } if !(threshold > 0.0 && threshold.is_finite()) => {
+                bad("threshold must be a positive number of metres")
+            }
+            CorrectionConfig::Median { window, .. } if window < 3 || window % 2 == 0 || window > 15 => bad("window must be odd, 3..=15"),
+            CorrectionConfig::Unet { threshold, .. } if !(threshold > 0.0 && threshold < 1.0) => bad("threshold must be a keep probability in (0, 1)"),
+            CorrectionConfig::Unet { checkpoint, preset, .. } => {
+                let (_, net, _) = crate::nn::load_correction(checkpoint.as_path(), tch::Device::Cpu)
+                    .map_err(|e| crate::Error::config(field, format!("checkpoint `{checkpoint}`: {e}")))?;
+                match preset {
+                    Some(p) if net.config.preset != Some(p) => bad(&format!("checkpoint `{checkpoint}` is not the `{}` preset", p.as_str())),
+                    _ => Ok(()),
+                }
+            }
+            _ => Ok(()),
+        }
+    }
+
+    /// The corrector this config describes.
+    pub fn build(&self) -> Box<dyn Corrector> {
+        match *self {
+            CorrectionConfig::None => Box::new(NoCorrection),
+            CorrectionConfig::MinPool { threshold } => Box::new(MinPoolFilter { threshold }),
+            CorrectionConfig::Median { window, threshold } => Box::new(MedianFilter { window, threshold }),
+            // `validate` loads the checkpoint first, so this only fails if the file changed in between.
+            CorrectionConfig::Unet { checkpoint, threshold, .. } => Box::new(
+                UnetCorrector::load(checkpoint.as_path(), threshold, tch::Device::Cpu)
+                    .unwrap_or_else(|e| panic!("correction checkpoint `{checkpoint}` (validated before the build): {e}")),
+            ),
+        }
+    }
+}

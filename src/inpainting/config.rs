@@ -1,0 +1,44 @@
+//! `InpaintConfig`: the inpainting methods a pipeline config can name (the `[inpaint]` section), their
+//! checks and the inpainter each builds.
+
+use super::{DiffusionInpaintConfig, DiffusionInpainter, Inpainter, NoInpainting, PushPull};
+use serde::{Deserialize, Serialize};
+
+/// The inpainting methods a pipeline config can name.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "method", rename_all = "snake_case", deny_unknown_fields)]
+pub enum InpaintConfig {
+    /// No filling: the target keeps only the re-projected pixels.
+    None,
+    /// Classical push–pull pyramid fill (smooth, fast).
+    PushPull,
+    /// The diffusion model with the exact range–null-space step (paper §3.2, reference §5.4).
+    Diffusion(DiffusionInpaintConfig),
+}
+
+impl InpaintConfig {
+    /// Checks the settings (and that a diffusion checkpoint loads); `field` names the config in errors.
+    pub fn validate(&self, field: &str) -> crate::Result<()> {
+        match self {
+            InpaintConfig::Diffusion(c) => c.validate(field),
+            _ => Ok(()),
+        }
+    }
+
+    /// The model file this method reads, if any.
+    pub fn checkpoint(&self) -> Option<crate::nn::ModelPath> {
+        match self {
+            InpaintConfig::Diffusion(c) => Some(c.checkpoint),
+            _ => None,
+        }
+    }
+
+    /// The inpainter this config describes (call [`Self::validate`] first).
+    pub fn build(&self) -> crate::Result<Box<dyn Inpainter>> {
+        Ok(match self {
+            InpaintConfig::None => Box::new(NoInpainting),
+            InpaintConfig::PushPull => Box::new(PushPull),
+            InpaintConfig::Diffusion(c) => Box::new(DiffusionInpainter::load(c, tch::Device::Cpu)?),
+        })
+    }
+}
