@@ -98,3 +98,98 @@ fn manifest_table_and_output_formats() {
     let bad = bin().args(["query"]).arg(&ds).arg("select nosuchcolumn from pairs").output().unwrap();
     assert!(!bad.status.success() && String::from_utf8_lossy(&bad.stderr).contains("nosuchcolumn"));
 }
+
+/// Checks our JSON and CSV files against DuckDB reading the committed shards themselves (argv: dataset,
+/// json file, csv file): strict JSON, the documented NaN/inf forms, lists and binary intact.
+const CHECK_FORMATS_PY: &str = r#"
+import json, math, os, struct, sys
+import duckdb, pyarrow.csv as pc
+
+root, json_path, csv_path = sys.argv[1:4]
+files = []
+for name in sorted(os.listdir(os.path.join(root, "manifest"))):
+    if name.startswith("pairs-") and name.endswith(".json"):
+        with open(os.path.join(root, "manifest", name)) as f:
+            files.append(os.path.join(root, "shards", json.load(f)["file"]))
+con = duckdb.connect()
+listed = ", ".join("'" + f.replace("'", "''") + "'" for f in files)
+ref = con.execute(f"select unit_index, overlap_source, source_points, source_depth_png from read_parquet([{listed}]) order by unit_index limit 5").fetchall()
+assert len(ref) == 5, ref
+
+f32 = lambda v: struct.unpack("f", struct.pack("f", v))[0]
+def same_points(ours, theirs, what):
+    assert len(ours) == len(theirs) > 0, (what, len(ours), len(theirs))
+    for p, q in zip(ours, theirs):
+        assert len(p) == 3 and all(f32(a) == b for a, b in zip(p, q)), (what, p, q)
+
+def no_constants(c):
+    raise ValueError("not strict JSON: " + c)
+
+columns = ["r", "x", "unit_index", "ov", "source_points", "png", "b", "l"]
+with open(json_path) as f:
+    rows = [json.loads(line, parse_constant=no_constants) for line in f]
+assert len(rows) == 5, len(rows)
+for i, (row, (unit, ov, points, png)) in enumerate(zip(rows, ref)):
+    assert list(row) == columns, list(row)
+    assert row["r"] == i + 1 and row["unit_index"] == unit and row["ov"] == ov, (row["r"], row["unit_index"], row["ov"], unit, ov)
+    assert row["x"] == (2.5 if i == 4 else None), ("json x", i, row["x"])
+    same_points(row["source_points"], points, "json")
+    assert row["png"] == png.hex() and row["b"] == "00ff61" and row["l"] == [1.5, None, None], (row["b"], row["l"])
+
+got = con.execute(f"select * from read_csv('{csv_path}', header = true)").fetchall()
+names = [d[0] for d in con.description]
+assert names == columns, names
+assert len(got) == 5, len(got)
+for i, (row, (unit, ov, points, png)) in enumerate(zip(got, ref)):
+    r, x, u, o, pts, hx, b, l = row
+    assert (r, u, o) == (i + 1, unit, ov), (row[:4], unit, ov)
+    expect = [math.nan, math.inf, -math.inf, None, 2.5][i]
+    assert (x is None) == (expect is None) and (expect is None or (math.isnan(x) and math.isnan(expect)) or x == expect), ("csv x", i, x)
+    same_points(json.loads(pts), points, "csv")
+    assert hx == png.hex() and b == "00ff61" and json.loads(l) == [1.5, None, None], (b, l)
+
+opts = pc.ConvertOptions(null_values=[""], column_types={"x": "float64"})
+xs = pc.read_csv(csv_path, convert_options=opts).column("x").to_pylist()
+assert [str(v) for v in xs] == ["nan", "inf", "-inf", "None", "2.5"], xs
+print("ok", len(rows))
+"#;
+
+#[test]
+fn nan_inf_null_lists_and_binary_in_every_text_format() {
+    let dir = tempfile::tempdir().unwrap();
+    let ds = dataset(dir.path());
+    let sql = "select r, \
+               case r when 1 then cast('NaN' as double) when 2 then 1.0 / 0.0 when 3 then -1.0 / 0.0 \
+               when 4 then null else 2.5 end as x, \
+               unit_index, overlap_source as ov, source_points, source_depth_png as png, X'00ff61' as b, \
+               make_array(1.5, cast('NaN' as double), cast('-inf' as double)) as l \
+               from (select row_number() over (order by unit_index) as r, * from pairs) where r <= 5 order by r";
+    let write = |format: &str| {
+        let path = dir.path().join(format!("out.{format}"));
+        let mut query = bin();
+        let o = query.args(["query"]).arg(&ds).args([sql, "--format", format, "--output"]).arg(&path).output().unwrap();
+        assert!(o.status.success(), "--format {format}: {}", String::from_utf8_lossy(&o.stderr));
+        path
+    };
+    let (json, csv, table) = (write("json"), write("csv"), write("table"));
+
+    let mut check = std::process::Command::new(python());
+    let py = check.arg("-c").arg(CHECK_FORMATS_PY).arg(&ds).args([&json, &csv]).output().unwrap();
+    assert!(py.status.success(), "run scripts/install-test-deps.sh: {}", String::from_utf8_lossy(&py.stderr));
+    assert_eq!(String::from_utf8_lossy(&py.stdout).trim(), "ok 5");
+
+    // The table: the header names every column, one line per row, the count, wide cells cut.
+    let table = std::fs::read_to_string(table).unwrap();
+    let lines: Vec<&str> = table.lines().collect();
+    let header: Vec<&str> = lines[1].split('|').map(str::trim).filter(|c| !c.is_empty()).collect();
+    assert_eq!(header, ["r", "x", "unit_index", "ov", "source_points", "png", "b", "l"], "{table}");
+    let rows: Vec<Vec<&str>> =
+        lines[3..].iter().filter(|l| l.starts_with('|')).map(|l| l.split('|').map(str::trim).collect()).collect();
+    assert_eq!(rows.len(), 5, "{table}");
+    assert_eq!(rows.iter().map(|r| r[2]).collect::<Vec<_>>(), ["NaN", "inf", "-inf", "NULL", "2.5"]);
+    assert_eq!(lines.last(), Some(&"(5 rows)"));
+    for r in &rows {
+        assert!(r[5].ends_with('…') && r[5].chars().count() == 60 && r[6].ends_with('…'), "{r:?}");
+        assert_eq!((r[7], r[8]), ("00ff61", "[1.5, NaN, -inf]"));
+    }
+}

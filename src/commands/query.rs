@@ -6,7 +6,8 @@ use std::io::Write;
 use std::path::PathBuf;
 
 #[derive(Debug, clap::Args)]
-#[command(after_help = "Examples:\n  \
+#[command(after_help = "Binary values are lowercase hex in the table, csv and json formats.\n\n\
+Examples:\n  \
 pointreggpt query out/demo \"select status, count(*) n from pairs group by status\"\n  \
 pointreggpt query out/demo \"select floor(overlap_source*10)/10 bin, count(*) from pairs where status='ok' group by bin order by bin\"\n  \
 pointreggpt query out/demo \"select scene, count(*) pairs, avg(array_length(source_points)) pts from pairs group by scene\" --format csv\n  \
@@ -16,7 +17,7 @@ pub struct QueryArgs {
     pub dataset: PathBuf,
     /// The SQL statement. Tables: pairs, labels, manifest (committed shards only).
     pub sql: String,
-    /// Output format.
+    /// Output format. NaN and ±inf: null in json; NaN, inf, -inf in csv and table (details in --help).
     #[arg(long, value_enum, default_value = "table")]
     pub format: OutputFormat,
     /// Write to this file instead of standard output (required for parquet).
