@@ -12,6 +12,7 @@ pub mod inpainting;
 pub mod labels;
 pub mod nn;
 pub mod pipeline;
+pub mod ply;
 pub mod query;
 pub mod preview;
 pub mod rng;

@@ -7,6 +7,8 @@ mod support;
 
 use pointreggpt::export::npy::read_npy_points;
 use pointreggpt::export::pointreggpt::official_keep;
+use pointreggpt::export::PairWriter;
+use pointreggpt::geometry::Point;
 use pointreggpt::geometry::{pose_from_rows, transform_points};
 use pointreggpt::pipeline::{run_build, BuildConfig, BuildOptions};
 use pointreggpt::preview::montage_size;
@@ -14,9 +16,9 @@ use pointreggpt::preview::stats::{overlap_bin, PLOT_SIZE, STATUSES};
 use pointreggpt::runtime::CancelToken;
 use pointreggpt::shards::dataset::Dataset;
 use pointreggpt::shards::row::{PairRow, Status};
-use pointreggpt::sources::ply::read_ply;
 use serde_json::json;
 use std::path::{Path, PathBuf};
+use support::ply::read_ply;
 use support::{bin, python, synthetic_config};
 
 /// 2 scenes × 4 frames, one sample each, shards of 4; `min_overlap = 0.6` rejects some pairs, so the
@@ -277,4 +279,85 @@ fn pair_dataset_py_reads_only_the_committed_shards() {
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(v["pairs"], expected.len());
     assert_eq!(v["files"], 2);
+}
+
+/// An `ok` row with empty clouds and identity pose, for the writer tests below.
+fn empty_row() -> PairRow {
+    let mut t = [0.0; 16];
+    [0, 5, 10, 15].iter().for_each(|&i| t[i] = 1.0);
+    PairRow {
+        unit_index: 0,
+        pair_key: "s/frame-000000#0".into(),
+        scene: "s".into(),
+        frame_key: "s/frame-000000".into(),
+        sample_index: 0,
+        source_path: String::new(),
+        source_hash: String::new(),
+        status: Status::Ok,
+        message: String::new(),
+        seed: 0,
+        width: 4,
+        height: 4,
+        source_intrinsics: [2.0, 2.0, 2.0, 2.0],
+        target_intrinsics: [2.0, 2.0, 2.0, 2.0],
+        t_target_from_source: t,
+        pose_draws: 1,
+        source_points: Vec::new(),
+        target_points: Vec::new(),
+        overlap_source: 0.0,
+        overlap_target: 0.0,
+        source_depth_png: Vec::new(),
+        condition_depth_png: Vec::new(),
+        target_depth_png: Vec::new(),
+        known_mask_png: Vec::new(),
+        config_hash: String::new(),
+        code_version: String::new(),
+        stages: String::new(),
+        timings: Vec::new(),
+    }
+}
+
+#[test]
+fn the_ply_writer_writes_both_clouds_and_the_exact_matrix() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut row = empty_row();
+    row.source_points = vec![Point::new(1.0, 2.0, 3.0)];
+    row.t_target_from_source[3] = 0.1;
+    let mut w = pointreggpt::export::ply::PlyWriter::new(dir.path());
+    w.write(0, &row).unwrap();
+    w.finish().unwrap();
+    let d = dir.path().join("s_frame-000000_0");
+    assert_eq!(read_ply(&d.join("source.ply")).unwrap(), row.source_points);
+    assert!(read_ply(&d.join("target.ply")).unwrap().is_empty());
+    let nums: Vec<f64> = std::fs::read_to_string(d.join("T_target_from_source.txt")).unwrap().split_whitespace().map(|s| s.parse().unwrap()).collect();
+    assert_eq!(nums, row.t_target_from_source.to_vec());
+}
+
+#[test]
+fn the_authors_layout_puts_both_clouds_in_the_source_frame_and_gt_log_follows_the_keep_rule() {
+    let dir = tempfile::tempdir().unwrap();
+    let pose = nalgebra::Isometry3::new(nalgebra::Vector3::new(0.1, -0.2, 0.3), nalgebra::Vector3::new(0.05, 0.1, -0.02));
+    let src: Vec<Point> = (0..1200).map(|i| Point::new(i as f32 * 1e-3, 0.5, 2.0)).collect();
+    let mut row = empty_row();
+    row.t_target_from_source = pointreggpt::geometry::pose_to_rows(&pose);
+    row.target_points = transform_points(&src, &pose);
+    row.source_points = src.clone();
+    (row.overlap_source, row.overlap_target) = (0.05, 0.123456);
+    let mut w = pointreggpt::export::pointreggpt::PointRegGptWriter::new(dir.path());
+    w.write(0, &row).unwrap();
+    row.target_points.truncate(999);
+    w.write(1, &row).unwrap();
+    assert_eq!(w.finish().unwrap(), Some(1));
+    let gt = std::fs::read_to_string(dir.path().join("metadata/gt.log")).unwrap();
+    assert_eq!(gt, "scene-000000\t0\t1\t0.0500\t0.1235\n");
+    let d = dir.path().join("data/scene-000000");
+    let tgt = read_ply(&d.join("sample-000001.cloud.ply")).unwrap();
+    let err = src.iter().zip(&tgt).map(|(a, b)| (a - b).norm()).fold(0.0f32, f32::max);
+    assert!(err < 1e-5, "target moved back into the source frame: {err}");
+    let nums: Vec<f64> = std::fs::read_to_string(d.join("sample-000001.pose.txt")).unwrap().split_whitespace().map(|s| s.parse().unwrap()).collect();
+    let back = pose_from_rows(&nums.try_into().unwrap()).unwrap();
+    assert!((back.to_homogeneous() - pose.inverse().to_homogeneous()).abs().max() < 1e-12);
+    let k = std::fs::read_to_string(d.join("camera-intrinsics.txt")).unwrap();
+    assert_eq!(k.lines().count(), 3);
+    assert!(k.starts_with("2.000000000000000000e+00 0.000000000000000000e+00 2.000000000000000000e+00\n"));
 }

@@ -6,14 +6,14 @@
 
 use nalgebra::{Isometry3, Point3};
 use pointreggpt::geometry::{DepthMap, Intrinsics, Point};
-use pointreggpt::sources::ply::read_ply;
 use pointreggpt::sources::synthetic::{SyntheticConfig, SyntheticSequence};
 use pointreggpt::sources::threedmatch;
-use pointreggpt::tsdf::{fuse_frames, write_mesh_ply, TsdfConfig};
+use pointreggpt::tsdf::{fuse_frames, TsdfConfig};
 use rayon::prelude::*;
 use std::time::Instant;
 
 mod support;
+use support::ply::read_ply;
 use support::real_data;
 
 /// `q`-quantile (0..1) of `v`.
@@ -76,7 +76,7 @@ fn fused_synthetic_frames_lie_on_the_true_surfaces() {
     assert!(mesh.triangles.len() > 150_000 && mesh_mean < 0.002, "{} triangles, {mesh_mean} m", mesh.triangles.len());
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("fragment.ply");
-    write_mesh_ply(&path, &mesh).unwrap();
+    pointreggpt::ply::write_mesh(&path, &mesh.vertices, &mesh.triangles).unwrap();
     assert_eq!(read_ply(&path).unwrap(), mesh.vertices);
 
     // Ray cast from a trajectory pose between two integrated frames against the exact render.

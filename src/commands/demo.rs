@@ -9,7 +9,8 @@ use crate::geometry::{
 use crate::inpainting::{InpaintConfig, InpaintContext};
 use crate::rng::{unit_seed, Rng};
 use crate::sources::synthetic::{SyntheticConfig, SyntheticSequence};
-use crate::sources::{depth_png, ply, text};
+use crate::ply;
+use crate::sources::{depth_png, text};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
@@ -68,8 +69,8 @@ pub fn run(args: &DemoArgs, out: &mut dyn Write) -> Result<()> {
     write_depth(&p("target.depth.png"), &target_depth)?;
     write_depth(&p("target_true.depth.png"), &truth)?;
     write_mask(&p("known.mask.png"), &proj.known, k.width, k.height)?;
-    ply::write_ply(&p("source.ply"), &source_vox)?;
-    ply::write_ply(&p("target.ply"), &target_vox)?;
+    ply::write_points(&p("source.ply"), &source_vox)?;
+    ply::write_points(&p("target.ply"), &target_vox)?;
     text::write_pose_file(&p("T_target_from_source.txt"), &t_target_from_source)?;
     text::write_intrinsics_file(&p("camera-intrinsics.txt"), &k)?;
 

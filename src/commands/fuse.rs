@@ -3,8 +3,9 @@
 
 use crate::error::{Error, Result};
 use crate::geometry::relative_pose;
-use crate::sources::{open_sequences, ply, Layout};
-use crate::tsdf::{write_mesh_ply, TsdfConfig, TsdfVolume};
+use crate::ply;
+use crate::sources::{open_sequences, Layout};
+use crate::tsdf::{TsdfConfig, TsdfVolume};
 use std::io::Write;
 use std::path::PathBuf;
 
@@ -60,8 +61,8 @@ pub fn run(args: &FuseArgs, out: &mut dyn Write) -> Result<()> {
     std::fs::create_dir_all(&args.out).map_err(|e| Error::io(&args.out, e))?;
     let points = volume.extract_points(args.weight_threshold);
     let mesh = volume.extract_mesh(args.weight_threshold);
-    ply::write_ply(&args.out.join("fused.cloud.ply"), &points)?;
-    write_mesh_ply(&args.out.join("fused.mesh.ply"), &mesh)?;
+    ply::write_points(&args.out.join("fused.cloud.ply"), &points)?;
+    ply::write_mesh(&args.out.join("fused.mesh.ply"), &mesh.vertices, &mesh.triangles)?;
     writeln!(
         out,
         "fused {} frames of {} ({} blocks): {} surface points, mesh {} vertices / {} triangles -> {}",

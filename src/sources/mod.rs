@@ -5,7 +5,6 @@
 
 pub mod catalog;
 pub mod depth_png;
-pub mod ply;
 pub mod scannet;
 pub mod synthetic;
 pub mod text;

@@ -1,9 +1,7 @@
-//! [`Mesh`] (indexed triangles, metres) and its binary little-endian PLY writer.
+//! [`Mesh`] (indexed triangles, metres); [`crate::ply::write_mesh`] writes it.
 
-use crate::error::{Error, Result};
 use crate::geometry::Point;
 use std::collections::HashMap;
-use std::path::Path;
 
 /// An indexed triangle mesh: vertex positions in metres and triangles as three vertex indices,
 /// counter-clockwise seen from the side the normal points to.
@@ -41,40 +39,6 @@ impl Mesh {
     }
 }
 
-/// The mesh as a binary little-endian PLY: `element vertex` with float `x y z`, then `element face`
-/// with `property list uchar int vertex_indices`.
-pub fn encode_mesh_ply(mesh: &Mesh) -> Vec<u8> {
-    let header = format!(
-        "ply\nformat binary_little_endian 1.0\ncomment written by pointreggpt (TSDF marching cubes)\n\
-         element vertex {}\nproperty float x\nproperty float y\nproperty float z\n\
-         element face {}\nproperty list uchar int vertex_indices\nend_header\n",
-        mesh.vertices.len(),
-        mesh.triangles.len()
-    );
-    let mut out = Vec::with_capacity(header.len() + 12 * mesh.vertices.len() + 13 * mesh.triangles.len());
-    out.extend_from_slice(header.as_bytes());
-    for p in &mesh.vertices {
-        for v in [p.x, p.y, p.z] {
-            out.extend_from_slice(&v.to_le_bytes());
-        }
-    }
-    for t in &mesh.triangles {
-        out.push(3);
-        for i in t {
-            out.extend_from_slice(&(*i as i32).to_le_bytes());
-        }
-    }
-    out
-}
-
-/// Writes [`encode_mesh_ply`] of `mesh` to `path`, creating parent folders.
-pub fn write_mesh_ply(path: &Path, mesh: &Mesh) -> Result<()> {
-    if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
-        std::fs::create_dir_all(parent).map_err(|e| Error::io(parent, e))?;
-    }
-    std::fs::write(path, encode_mesh_ply(mesh)).map_err(|e| Error::io(path, e))
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -100,19 +64,5 @@ mod tests {
         let mut flipped = t.clone();
         flipped.triangles[3] = [1, 3, 2];
         assert!(!flipped.is_closed(), "inconsistent orientation");
-    }
-
-    #[test]
-    fn ply_has_vertices_and_faces_readable_by_the_point_reader() {
-        let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("m/tet.ply");
-        let t = tetrahedron();
-        write_mesh_ply(&path, &t).unwrap();
-        let bytes = std::fs::read(&path).unwrap();
-        let header_end = bytes.windows(11).position(|w| w == b"end_header\n").unwrap() + 11;
-        assert_eq!(bytes.len(), header_end + 4 * 12 + 4 * 13);
-        // The last face: count 3, then 1, 2, 3 as little-endian int32.
-        assert_eq!(&bytes[bytes.len() - 13..], &[3, 1, 0, 0, 0, 2, 0, 0, 0, 3, 0, 0, 0]);
-        assert_eq!(crate::sources::ply::read_ply(&path).unwrap(), t.vertices);
     }
 }

@@ -9,10 +9,12 @@
 //! `(i + ½)·s`. Every result is the same bit for bit whatever the rayon thread count.
 //!
 //! Files: [`config`] (parameters), [`volume`] (hashed blocks), `integrate` (block allocation and
-//! the parallel update) with its per-block kernel in `update` (scalar and AVX2, bit-identical),
+//! the parallel update) with its per-block kernel in `update` (scalar and AVX2, bit-identical) and the
+//! f32 camera both use in `camera`,
 //! `extract` (points), `marching_cubes` with its lookup tables in [`tables`], `raycast` with its
-//! lookups in `sample`, [`mesh`] (mesh type and PLY writer), and the fusion helpers below.
+//! lookups in `sample`, [`mesh`] (the mesh type; [`crate::ply`] writes it), and the fusion helpers below.
 
+mod camera;
 pub mod config;
 mod extract;
 mod integrate;
@@ -26,7 +28,7 @@ pub mod volume;
 
 pub use config::TsdfConfig;
 pub use extract::MAX_CROSSING_TSDF;
-pub use mesh::{encode_mesh_ply, write_mesh_ply, Mesh};
+pub use mesh::Mesh;
 pub use volume::{TsdfVolume, Voxel};
 
 use crate::error::{Error, Result};

@@ -1,7 +1,7 @@
 //! The projective TSDF update of one block, in portable scalar code and an AVX2 kernel that gives
 //! bit-identical results (same operations in the same order, no fused multiply-add).
 
-use super::integrate::Camera;
+use super::camera::Camera;
 use super::volume::Voxel;
 
 /// What one integration applies to every touched block.

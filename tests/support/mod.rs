@@ -1,6 +1,8 @@
 //! Shared fixtures for the integration tests.
 #![allow(dead_code)]
 
+pub mod ply;
+
 use std::path::PathBuf;
 
 /// The real-data folder from `POINTREGGPT_REAL_DATA` (`make test` and `.ci/run` set it to

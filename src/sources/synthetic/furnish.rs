@@ -3,7 +3,7 @@
 //! Pieces never overlap (their bounding boxes may touch); everything is built in a piece's local
 //! frame and then turned and moved into place.
 
-use super::scene::{camera_zone, SceneConfig, LOW_TOP_M};
+use super::room::{camera_zone, SceneConfig, LOW_TOP_M};
 use super::shapes::Shape;
 use crate::rng::Rng;
 use nalgebra::{Point3, Vector3};

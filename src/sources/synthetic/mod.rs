@@ -18,6 +18,7 @@
 
 mod furnish;
 mod render;
+mod room;
 mod scene;
 mod sensor;
 mod shapes;
@@ -25,7 +26,8 @@ mod trajectory;
 mod writer;
 
 pub use render::Render;
-pub use scene::{camera_zone, Scene, SceneConfig, LOW_TOP_M, WALL_BAND_M};
+pub use room::{camera_zone, SceneConfig, LOW_TOP_M, WALL_BAND_M};
+pub use scene::Scene;
 pub use sensor::SensorConfig;
 pub use shapes::{Aabb, Hit, Shape};
 pub use trajectory::{look_pose, trajectory, CAMERA_CLEARANCE_M};

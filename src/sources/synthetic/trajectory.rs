@@ -2,7 +2,8 @@
 //! at head height, looking outwards and slightly down at the walls and furniture, with slow swings of
 //! heading, pitch, height and radius, like a person scanning the room with a 30 Hz depth sensor.
 
-use super::scene::{camera_zone, Scene, LOW_TOP_M};
+use super::room::{camera_zone, LOW_TOP_M};
+use super::scene::Scene;
 use crate::rng::Rng;
 use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
 use std::f64::consts::{PI, TAU};
