@@ -7,7 +7,7 @@ use std::io::Write;
 use std::path::PathBuf;
 
 #[derive(Debug, clap::Args)]
-#[command(after_help = "--where takes a SQL boolean expression over the columns of the pairs table, exactly as in \
+#[command(after_help = "--where takes a SQL boolean expression over the columns of the pairs table: the where clause of \
 `pointreggpt query <dataset> \"select ... from pairs where <predicate>\"` (text quoted with ', names unquoted), e.g. \
 --where \"status = 'ok' and overlap_source >= 0.3\", --where \"scene in ('a','b') and pair_key like '%#0'\", \
 --where \"not (unit_index between 10 and 19)\", --where \"array_length(target_points) < 2000\". \
