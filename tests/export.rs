@@ -1,7 +1,7 @@
 //! `export`, `preview` and `stats` end to end on a small synthetic dataset: every export format read
 //! back (Rust readers and Python: numpy PLY parser, pickle, np.load), ground-truth alignment, the
-//! official gt.log keep rule, `--where`/`--limit` against rows filtered in Rust, PNG outputs, and the
-//! pyarrow `PairDataset` of tests/python/pair_dataset.py.
+//! official gt.log keep rule, SQL `--where`/`--limit` against rows filtered in Rust and DuckDB, `stats`
+//! counts against the same, PNG outputs, and the pyarrow `PairDataset` of tests/python/pair_dataset.py.
 
 mod support;
 
@@ -123,23 +123,49 @@ fn every_format_reads_back_and_agrees_with_the_rows() {
     assert_eq!(v["ply"]["pairs"], rows.len());
 }
 
+/// DuckDB's rows for each query, over the same committed shard files (tests/python/duckdb_query.py).
+fn duckdb(ds: &Path, queries: &[String]) -> Vec<serde_json::Value> {
+    let o = std::process::Command::new(python()).arg(script("duckdb_query.py")).arg(ds).args(queries).output().unwrap();
+    assert!(o.status.success(), "duckdb_query.py failed (duckdb is required: scripts/install-test-deps.sh):\n{}", String::from_utf8_lossy(&o.stderr));
+    String::from_utf8(o.stdout).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect()
+}
+
+/// The pair keys DuckDB selects with `predicate`, in unit order.
+fn duckdb_keys(ds: &Path, predicates: &[String]) -> Vec<Vec<String>> {
+    // The predicate on lines of its own, so a trailing `--` comment ends there.
+    let queries: Vec<String> = predicates.iter().map(|p| format!("select pair_key from pairs where (\n{p}\n) order by unit_index")).collect();
+    let rows = duckdb(ds, &queries);
+    rows.iter().map(|r| r.as_array().unwrap().iter().map(|k| k[0].as_str().unwrap().to_string()).collect()).collect()
+}
+
 #[test]
-fn where_and_limit_select_exactly_the_rows_filtered_in_rust() {
+fn where_and_limit_select_exactly_the_rows_filtered_in_rust_and_duckdb() {
     let dir = tempfile::tempdir().unwrap();
     let (ds, rows) = build(dir.path());
+    let mut counts: Vec<usize> = rows.iter().map(|r| r.target_points.len()).collect();
+    counts.sort();
+    let median = counts[counts.len() / 2];
     type Predicate = Box<dyn Fn(&PairRow) -> bool>;
-    let cases: Vec<(&str, Predicate)> = vec![
-        ("status = 'ok' and overlap_source >= 0.6", Box::new(|r| r.status == Status::Ok && r.overlap_source >= 0.6)),
-        ("scene = 'synthetic-1' or status != 'ok'", Box::new(|r| r.scene == "synthetic-1" || r.status != Status::Ok)),
-        ("(unit_index < 3 or unit_index >= 6) and n_target_points > 1000", Box::new(|r| (r.unit_index < 3 || r.unit_index >= 6) && r.target_points.len() > 1000)),
-        ("overlap_target <= 0.75 AND frame_key != 'synthetic-0/frame-000000'", Box::new(|r| r.overlap_target <= 0.75 && r.frame_key != "synthetic-0/frame-000000")),
-        ("status = 'low_overlap'", Box::new(|r| r.status == Status::LowOverlap)),
-        ("pair_key = 'nothing#0'", Box::new(|_| false)),
+    let like = |k: &str| k.strip_prefix("synthetic-1/frame-00000").is_some_and(|t| t.chars().count() == 3 && t.ends_with("#0"));
+    let cases: Vec<(String, Predicate)> = vec![
+        ("status = 'ok' and overlap_source >= 0.6".into(), Box::new(|r| r.status == Status::Ok && r.overlap_source >= 0.6)),
+        ("scene = 'synthetic-1' or status <> 'ok'".into(), Box::new(|r| r.scene == "synthetic-1" || r.status != Status::Ok)),
+        ("(unit_index < 3 or unit_index >= 6) and array_length(source_points) > 1000".into(), Box::new(|r| (r.unit_index < 3 || r.unit_index >= 6) && r.source_points.len() > 1000)),
+        ("overlap_target <= 0.75 AND frame_key != 'synthetic-0/frame-000000'".into(), Box::new(|r| r.overlap_target <= 0.75 && r.frame_key != "synthetic-0/frame-000000")),
+        ("scene in ('synthetic-0', 'elsewhere') and not status = 'ok'".into(), Box::new(|r| r.scene == "synthetic-0" && r.status != Status::Ok)),
+        ("pair_key like 'synthetic-1/frame-00000_#0' and unit_index not in (4, 7)".into(), Box::new(move |r| like(&r.pair_key) && ![4, 7].contains(&r.unit_index))),
+        ("not (status = 'ok' or pairs.scene = 'synthetic-0')".into(), Box::new(|r| !(r.status == Status::Ok || r.scene == "synthetic-0"))),
+        (format!("array_length(target_points) < {median}"), Box::new(move |r| r.target_points.len() < median)),
+        ("status = 'low_overlap'".into(), Box::new(|r| r.status == Status::LowOverlap)),
+        ("pair_key = 'nothing#0' -- no such pair".into(), Box::new(|_| false)),
     ];
+    let in_duckdb = duckdb_keys(&ds, &cases.iter().map(|(p, _)| p.clone()).collect::<Vec<_>>());
     for (i, (predicate, f)) in cases.iter().enumerate() {
+        let want = keys(rows.iter().filter(|r| f(r)));
+        assert_eq!(in_duckdb[i], want, "duckdb where {predicate}");
         let out = dir.path().join(format!("ply{i}"));
         export(&ds, "ply", &out, &["--where", predicate]);
-        assert_eq!(exported_keys(&out), keys(rows.iter().filter(|r| f(r))), "ply --where {predicate}");
+        assert_eq!(exported_keys(&out), want, "ply --where {predicate}");
         let out = dir.path().join(format!("official{i}"));
         export(&ds, "pointreggpt", &out, &["--where", predicate]);
         let want = keys(rows.iter().filter(|r| f(r) && r.status == Status::Ok));
@@ -147,6 +173,8 @@ fn where_and_limit_select_exactly_the_rows_filtered_in_rust() {
         let scenes = std::fs::read_dir(out.join("data")).map(|d| d.count()).unwrap_or(0);
         assert_eq!(scenes, want.len());
     }
+    let small = rows.iter().filter(|r| r.target_points.len() < median).count();
+    assert!(small > 0 && small < rows.len(), "the array_length case selects some rows, not all");
     for limit in [0usize, 1, 3, 100] {
         let out = dir.path().join(format!("limit{limit}"));
         let line = export(&ds, "geotransformer", &out, &["--limit", &limit.to_string()]);
@@ -154,10 +182,13 @@ fn where_and_limit_select_exactly_the_rows_filtered_in_rust() {
         assert_eq!(exported_keys(&out), want, "--limit {limit}");
         assert!(line.contains(&format!("wrote {} pairs", want.len())), "{line}");
     }
+    let out = dir.path().join("where-limit");
+    export(&ds, "ply", &out, &["--where", "status <> 'ok' or scene = 'synthetic-1'", "--limit", "2"]);
+    assert_eq!(exported_keys(&out), keys(rows.iter().filter(|r| r.status != Status::Ok || r.scene == "synthetic-1").take(2)));
 }
 
 #[test]
-fn a_bad_where_fails_naming_the_column_or_the_token() {
+fn a_bad_where_fails_naming_the_column_or_the_problem() {
     let dir = tempfile::tempdir().unwrap();
     let (ds, _) = build(dir.path());
     let ds = ds.to_str().unwrap();
@@ -166,10 +197,11 @@ fn a_bad_where_fails_naming_the_column_or_the_token() {
     for (predicate, needle) in [
         ("overlap >= 0.3", "unknown column `overlap`"),
         ("status = 'ok' and scen = 'a'", "unknown column `scen`"),
-        ("status = ok", "compares with a quoted text"),
-        ("overlap_source >= 'high'", "compares with a number"),
-        ("overlap_source >= 0.3 and", "unexpected end"),
-        ("overlap_source ~ 0.3", "unexpected character `~`"),
+        ("status = ok", "unknown column `ok`"),
+        ("n_source_points > 1000", "array_length(source_points)"),
+        ("overlap_source >= 'high'", "Cannot cast string 'high'"),
+        ("overlap_source >= 0.3 and", "not a SQL expression"),
+        ("overlap_source * 2", "not true/false"),
     ] {
         for command in ["export", "preview", "stats"] {
             let mut args = vec![command, ds, "--out", out, "--where", predicate];
@@ -222,33 +254,68 @@ fn previews_decode_with_the_expected_size_and_names() {
 fn stats_counts_equal_the_rows_by_status_and_bins() {
     let dir = tempfile::tempdir().unwrap();
     let (ds, rows) = build(dir.path());
-    let out = dir.path().join("st");
-    let (ok, stdout, stderr) = run(&["stats", ds.to_str().unwrap(), "--out", out.to_str().unwrap(), "--per-scene"]);
-    assert!(ok, "{stderr}");
-    let text = std::fs::read_to_string(out.join("stats.txt")).unwrap();
-    assert!(stdout.starts_with(&text), "stdout repeats stats.txt");
-    let value = |label: &str, col: usize| -> u64 {
-        let line = text.lines().find(|l| l.split_whitespace().next() == Some(label) || l.starts_with(label)).unwrap_or_else(|| panic!("no line {label}"));
-        line[label.len()..].split_whitespace().nth(col).unwrap().parse().unwrap()
-    };
-    for st in STATUSES {
-        let n = rows.iter().filter(|r| r.status == st).count() as u64;
-        assert_eq!(value(st.as_str(), 0), n, "{}", st.as_str());
+    type Predicate = fn(&PairRow) -> bool;
+    let cases: [(Option<&str>, Predicate); 3] = [
+        (None, |_| true),
+        (Some("scene = 'synthetic-1' or overlap_target < 0.7"), |r| r.scene == "synthetic-1" || r.overlap_target < 0.7),
+        (Some("array_length(source_points) > 0 and not unit_index in (0, 5)"), |r| !r.source_points.is_empty() && ![0, 5].contains(&r.unit_index)),
+    ];
+    let predicates: Vec<String> = cases.iter().map(|(p, _)| p.unwrap_or("true").to_string()).collect();
+    let queries: Vec<String> = predicates.iter().map(|p| format!("select status, count(*) from pairs where (\n{p}\n) group by status")).collect();
+    let in_duckdb = duckdb(&ds, &queries);
+    for (i, (predicate, f)) in cases.iter().enumerate() {
+        let selected: Vec<&PairRow> = rows.iter().filter(|r| f(r)).collect();
+        let out = dir.path().join(format!("st{i}"));
+        let mut args = vec!["stats", ds.to_str().unwrap(), "--out", out.to_str().unwrap(), "--per-scene"];
+        if let Some(p) = predicate {
+            args.extend(["--where", p]);
+        }
+        let (ok, stdout, stderr) = run(&args);
+        assert!(ok, "{stderr}");
+        let text = std::fs::read_to_string(out.join("stats.txt")).unwrap();
+        assert!(stdout.starts_with(&text), "stdout repeats stats.txt");
+        let value = |label: &str, col: usize| -> u64 {
+            let line = text.lines().find(|l| l.split_whitespace().next() == Some(label) || l.starts_with(label)).unwrap_or_else(|| panic!("no line {label}"));
+            line[label.len()..].split_whitespace().nth(col).unwrap().parse().unwrap()
+        };
+        // Rows by status: the rows read back and filtered in Rust, and DuckDB over the same files.
+        let duck: Vec<(String, u64)> = in_duckdb[i].as_array().unwrap().iter().map(|r| (r[0].as_str().unwrap().into(), r[1].as_u64().unwrap())).collect();
+        for st in STATUSES {
+            let n = selected.iter().filter(|r| r.status == st).count() as u64;
+            assert_eq!(value(st.as_str(), 0), n, "{} where {predicate:?}", st.as_str());
+            let d = duck.iter().find(|(s, _)| s == st.as_str()).map_or(0, |(_, n)| *n);
+            assert_eq!(d, n, "duckdb {} where {predicate:?}", st.as_str());
+        }
+        assert_eq!(value("total", 0), selected.len() as u64);
+        let ok = || selected.iter().filter(|r| r.status == Status::Ok);
+        for b in 0..10 {
+            let label = format!("[{:.1}, {:.1}{}", b as f64 / 10.0, (b + 1) as f64 / 10.0, if b == 9 { "]" } else { ")" });
+            assert_eq!(value(&label, 0), ok().filter(|r| overlap_bin(r.overlap_source) == b).count() as u64, "{label}");
+            assert_eq!(value(&label, 1), ok().filter(|r| overlap_bin(r.overlap_target) == b).count() as u64, "{label}");
+        }
+        // Per scene: the rows by status, then `source/target` per bin.
+        for scene in ["synthetic-0", "synthetic-1"] {
+            let lines: Vec<&str> = text.lines().filter(|l| l.split_whitespace().next() == Some(scene)).collect();
+            let in_scene = || selected.iter().filter(|r| r.scene == scene);
+            if in_scene().count() == 0 {
+                assert!(lines.is_empty(), "{scene} has no selected rows: {text}");
+                continue;
+            }
+            let counts: Vec<u64> = lines[0].split_whitespace().skip(1).map(|v| v.parse().unwrap()).collect();
+            let want: Vec<u64> = STATUSES.iter().map(|s| in_scene().filter(|r| r.status == *s).count() as u64).collect();
+            assert_eq!(counts[..4], want[..], "{scene}");
+            let bins: Vec<&str> = lines[1].split_whitespace().skip(1).collect();
+            let want: Vec<String> = (0..10)
+                .map(|b| {
+                    let ok = || in_scene().filter(|r| r.status == Status::Ok);
+                    let n = |g: fn(&PairRow) -> f64| ok().filter(|r| overlap_bin(g(r)) == b).count();
+                    format!("{}/{}", n(|r| r.overlap_source), n(|r| r.overlap_target))
+                })
+                .collect();
+            assert_eq!(bins, want, "{scene} bins where {predicate:?}");
+        }
+        assert_eq!(png_info(&out.join("stats.png")), (PLOT_SIZE.0, PLOT_SIZE.1, png::ColorType::Rgb));
     }
-    assert_eq!(value("total", 0), rows.len() as u64);
-    for b in 0..10 {
-        let label = format!("[{:.1}, {:.1}{}", b as f64 / 10.0, (b + 1) as f64 / 10.0, if b == 9 { "]" } else { ")" });
-        let ok = rows.iter().filter(|r| r.status == Status::Ok);
-        assert_eq!(value(&label, 0), ok.clone().filter(|r| overlap_bin(r.overlap_source) == b).count() as u64, "{label}");
-        assert_eq!(value(&label, 1), ok.filter(|r| overlap_bin(r.overlap_target) == b).count() as u64, "{label}");
-    }
-    for scene in ["synthetic-0", "synthetic-1"] {
-        let line = text.lines().find(|l| l.starts_with(scene)).unwrap();
-        let counts: Vec<u64> = line.split_whitespace().skip(1).map(|v| v.parse().unwrap()).collect();
-        let want: Vec<u64> = STATUSES.iter().map(|s| rows.iter().filter(|r| r.scene == scene && r.status == *s).count() as u64).collect();
-        assert_eq!(counts[..4], want[..], "{scene}");
-    }
-    assert_eq!(png_info(&out.join("stats.png")), (PLOT_SIZE.0, PLOT_SIZE.1, png::ColorType::Rgb));
 }
 
 #[test]

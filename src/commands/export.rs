@@ -7,9 +7,10 @@ use std::io::Write;
 use std::path::PathBuf;
 
 #[derive(Debug, clap::Args)]
-#[command(after_help = "Columns for --where: status, scene, frame_key, pair_key (text, quoted: 'ok'), overlap_source, \
-overlap_target, sample_index, unit_index, n_source_points, n_target_points (numbers); comparisons = != < <= > >=, \
-joined by and/or with parentheses, e.g. --where \"overlap_source >= 0.3 and (scene = 'a' or scene = 'b')\". \
+#[command(after_help = "--where takes a SQL boolean expression over the columns of the pairs table: the where clause of \
+`pointreggpt query <dataset> \"select ... from pairs where <predicate>\"` (text quoted with ', names unquoted), e.g. \
+--where \"status = 'ok' and overlap_source >= 0.3\", --where \"scene in ('a','b') and pair_key like '%#0'\", \
+--where \"not (unit_index between 10 and 19)\", --where \"array_length(target_points) < 2000\". \
 The pointreggpt and geotransformer formats take ok rows only; ply writes every matching row.")]
 pub struct ExportArgs {
     /// The dataset folder.
@@ -20,7 +21,7 @@ pub struct ExportArgs {
     /// Output folder (must not exist or be empty).
     #[arg(long)]
     pub out: PathBuf,
-    /// Only rows matching this predicate, e.g. "status = 'ok' and overlap_source >= 0.3".
+    /// Only rows where this SQL predicate is true, e.g. "status = 'ok' and overlap_source >= 0.3".
     #[arg(long = "where", value_name = "PREDICATE")]
     pub filter: Option<String>,
     /// Write at most N pairs.

@@ -11,14 +11,15 @@ use std::path::PathBuf;
 #[command(after_help = "Each montage shows, left to right: the source depth, the re-projected condition (grey = unknown \
 pixels), the known mask, the inpainted target (one Turbo depth scale per montage, black = no depth), and both clouds \
 rendered into the target camera with the stored pose (red = source, green = target, yellow = both at the same depth). \
---where takes the predicates of `pointreggpt export`.")]
+--where takes a SQL predicate over the pairs table, as `pointreggpt export` does, e.g. --where \"status = 'low_overlap' \
+and scene like 'scene0%'\".")]
 pub struct PreviewArgs {
     /// The dataset folder.
     pub dataset: PathBuf,
     /// Output folder (created); files are named <pair key, sanitized>.png.
     #[arg(long)]
     pub out: PathBuf,
-    /// Only rows matching this predicate, e.g. "status = 'ok' and overlap_source < 0.3".
+    /// Only rows where this SQL predicate is true, e.g. "status = 'ok' and overlap_source < 0.3".
     #[arg(long = "where", value_name = "PREDICATE")]
     pub filter: Option<String>,
     /// At most N montages (the first matching rows in unit order).

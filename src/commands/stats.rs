@@ -8,6 +8,9 @@ use std::io::Write;
 use std::path::PathBuf;
 
 #[derive(Debug, clap::Args)]
+#[command(after_help = "The counts come from one SQL aggregate over the committed shards (no row is decoded); \
+--where is a SQL predicate over the pairs table, as for `pointreggpt export`, e.g. \
+--where \"scene in ('a','b') and array_length(target_points) >= 2000\".")]
 pub struct StatsArgs {
     /// The dataset folder.
     pub dataset: PathBuf,
@@ -17,10 +20,10 @@ pub struct StatsArgs {
     /// Add tables per scene.
     #[arg(long)]
     pub per_scene: bool,
-    /// Only rows matching this predicate (the language of `pointreggpt export --where`).
+    /// Only rows where this SQL predicate is true (as `pointreggpt export --where`).
     #[arg(long = "where", value_name = "PREDICATE")]
     pub filter: Option<String>,
-    /// No progress bar.
+    /// Accepted like export's and preview's; stats draws no bar (it runs one SQL query).
     #[arg(long)]
     pub no_progress: bool,
 }
@@ -29,7 +32,7 @@ pub fn run(args: &StatsArgs, out: &mut dyn Write) -> Result<()> {
     let w = |e: std::io::Error| Error::io("<stdout>", e);
     let filter = Filter::parse_opt(args.filter.as_deref())?;
     let ds = Dataset::open(&args.dataset)?;
-    let stats = collect_stats(&ds, &filter, !args.no_progress)?;
+    let stats = collect_stats(&ds, &filter)?;
     let text = write_stats(&stats, &args.out, args.per_scene)?;
     write!(out, "{text}").map_err(w)?;
     writeln!(out, "\nwrote {0}/stats.txt and {0}/stats.png", args.out.display()).map_err(w)?;

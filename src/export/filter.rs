@@ -1,134 +1,69 @@
-//! `--where` predicates over pair rows: `status = 'ok' and overlap_source >= 0.3 or scene != 'a'`.
+//! `--where` predicates: one SQL expression over the columns of the `pairs` table (the SQL of
+//! `pointreggpt query ... where <predicate>`), parsed and planned once with DataFusion, then evaluated on
+//! each shard's record batch to select rows before they are decoded into [`PairRow`](crate::shards::PairRow)s.
 //!
-//! Grammar (keywords case-insensitive, `and` binds tighter than `or`):
-//!
-//! ```text
-//! expr    := and ( "or" and )*
-//! and     := primary ( "and" primary )*
-//! primary := "(" expr ")" | column op literal
-//! op      := "=" | "==" | "!=" | "<>" | "<" | "<=" | ">" | ">="
-//! literal := 'text' (a quote doubled inside) | "text" | number
-//! ```
-//!
-//! Text columns take text literals (compared as strings), numeric columns numbers. Errors name the
-//! unknown column or the bad token and its position, under the field `--where`.
+//! `status = 'ok' and overlap_source >= 0.3`, `scene in ('a', 'b') and pair_key like '%#0'`,
+//! `not (unit_index between 3 and 5)`, `array_length(target_points) < 2000`. A row where the predicate
+//! is null (SQL `WHERE` semantics) is not selected. Errors name the problem under the field `--where`.
 
 use crate::error::{Error, Result};
-use super::tokens::{tokenize, Tok};
-use crate::shards::row::{PairRow, Status};
+use crate::shards::{pairs_schema, PAIRS_TABLE};
+use arrow::array::{Array, BooleanArray, RecordBatch};
+use arrow::compute::{cast, filter_record_batch};
+use arrow::datatypes::DataType;
+use datafusion::common::tree_node::TreeNode;
+use datafusion::common::{DFSchema, DataFusionError, SchemaError};
+use datafusion::logical_expr::Expr;
+use datafusion::physical_expr::PhysicalExpr;
+use datafusion::prelude::SessionContext;
+use std::sync::Arc;
 
-/// The columns a predicate can test, with their names in the language.
-pub const COLUMNS: &[(&str, Column)] = &[
-    ("status", Column::Status),
-    ("scene", Column::Scene),
-    ("frame_key", Column::FrameKey),
-    ("pair_key", Column::PairKey),
-    ("overlap_source", Column::OverlapSource),
-    ("overlap_target", Column::OverlapTarget),
-    ("sample_index", Column::SampleIndex),
-    ("unit_index", Column::UnitIndex),
-    ("n_source_points", Column::NSourcePoints),
-    ("n_target_points", Column::NTargetPoints),
-];
-
-/// A row field a predicate compares.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Column {
-    Status,
-    Scene,
-    FrameKey,
-    PairKey,
-    OverlapSource,
-    OverlapTarget,
-    SampleIndex,
-    UnitIndex,
-    NSourcePoints,
-    NTargetPoints,
-}
-
-/// A comparison operator.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Op {
-    Eq,
-    Ne,
-    Lt,
-    Le,
-    Gt,
-    Ge,
-}
-
-/// A literal of a comparison.
-#[derive(Clone, Debug, PartialEq)]
-pub enum Literal {
-    Text(String),
-    Number(f64),
-}
-
-/// A parsed predicate; [`Filter::All`] matches every row.
-#[derive(Clone, Debug, PartialEq)]
+/// Which rows to take: all of them, or those where a SQL predicate is true.
+#[derive(Clone, Debug)]
 pub enum Filter {
     All,
-    Compare(Column, Op, Literal),
-    And(Box<Filter>, Box<Filter>),
-    Or(Box<Filter>, Box<Filter>),
+    Sql(Predicate),
 }
 
-impl Column {
-    fn name(self) -> &'static str {
-        COLUMNS.iter().find(|(_, c)| *c == self).map(|(n, _)| *n).expect("every column is listed")
-    }
-
-    fn is_text(self) -> bool {
-        matches!(self, Column::Status | Column::Scene | Column::FrameKey | Column::PairKey)
-    }
-
-    fn text(self, row: &PairRow) -> &str {
-        match self {
-            Column::Status => row.status.as_str(),
-            Column::Scene => &row.scene,
-            Column::FrameKey => &row.frame_key,
-            _ => &row.pair_key,
-        }
-    }
-
-    fn number(self, row: &PairRow) -> f64 {
-        match self {
-            Column::OverlapSource => row.overlap_source,
-            Column::OverlapTarget => row.overlap_target,
-            Column::SampleIndex => row.sample_index as f64,
-            Column::UnitIndex => row.unit_index as f64,
-            Column::NSourcePoints => row.source_points.len() as f64,
-            _ => row.target_points.len() as f64,
-        }
-    }
-}
-
-impl Op {
-    fn test<T: PartialOrd + ?Sized>(self, a: &T, b: &T) -> bool {
-        match self {
-            Op::Eq => a == b,
-            Op::Ne => a != b,
-            Op::Lt => a < b,
-            Op::Le => a <= b,
-            Op::Gt => a > b,
-            Op::Ge => a >= b,
-        }
-    }
+/// A parsed and planned SQL predicate over the pairs schema.
+#[derive(Clone, Debug)]
+pub struct Predicate {
+    /// The text as the user wrote it.
+    text: String,
+    /// The planned expression; it reads columns by their index in the pairs schema.
+    physical: Arc<dyn PhysicalExpr>,
 }
 
 impl Filter {
-    /// Parses a predicate; an empty or blank text gives [`Filter::All`].
+    /// Parses a predicate; an empty or blank text gives [`Filter::All`]. Column names may be qualified
+    /// with the table (`pairs.status`), as in `pointreggpt query`.
     pub fn parse(text: &str) -> Result<Filter> {
-        let tokens = tokenize(text)?;
-        if tokens.is_empty() {
+        if text.trim().is_empty() {
             return Ok(Filter::All);
         }
-        let mut p = Parser { tokens, pos: 0 };
-        let f = p.or()?;
-        match p.tokens.get(p.pos) {
-            None => Ok(f),
-            Some((at, t)) => Err(bad(format!("unexpected {} at position {at}: expected `and`, `or` or the end", t.show()))),
+        let schema = pairs_schema();
+        let df_schema = DFSchema::try_from_qualified_schema(PAIRS_TABLE, &schema)
+            .map_err(|e| Error::Internal(format!("pairs schema for --where: {e}")))?;
+        let ctx = SessionContext::new();
+        let expr = ctx.parse_sql_expr(text, &df_schema).map_err(explain)?;
+        let per_group = |e: &Expr| Ok(matches!(e, Expr::AggregateFunction(_) | Expr::WindowFunction(_)));
+        if expr.exists(per_group).unwrap_or(false) {
+            return Err(bad(format!("`{text}` uses an aggregate or window function; a predicate tests one row at a time")));
         }
+        let physical = ctx.create_physical_expr(expr, &df_schema).map_err(explain)?;
+        match physical.data_type(&schema).map_err(explain)? {
+            DataType::Boolean | DataType::Null => {}
+            other => {
+                return Err(bad(format!(
+                    "`{text}` gives {other} values, not true/false; compare it, e.g. `overlap_source >= 0.3`"
+                )))
+            }
+        }
+        let filter = Filter::Sql(Predicate { text: text.to_string(), physical });
+        // Evaluated once on no rows, so an error in a constant (a text that is no number, ...) shows
+        // before any file is read or written.
+        filter.select(&RecordBatch::new_empty(schema))?;
+        Ok(filter)
     }
 
     /// Parses `Some(text)`, or gives [`Filter::All`] for `None`.
@@ -136,15 +71,28 @@ impl Filter {
         text.map_or(Ok(Filter::All), Filter::parse)
     }
 
-    /// Whether `row` satisfies the predicate.
-    pub fn matches(&self, row: &PairRow) -> bool {
+    /// The predicate text, `None` for [`Filter::All`].
+    pub fn sql(&self) -> Option<&str> {
         match self {
-            Filter::All => true,
-            Filter::Compare(c, op, Literal::Text(s)) => op.test(c.text(row), s.as_str()),
-            Filter::Compare(c, op, Literal::Number(v)) => op.test(&c.number(row), v),
-            Filter::And(a, b) => a.matches(row) && b.matches(row),
-            Filter::Or(a, b) => a.matches(row) || b.matches(row),
+            Filter::All => None,
+            Filter::Sql(p) => Some(&p.text),
         }
+    }
+
+    /// The rows of `batch` (pairs schema, in its column order) where the predicate is true.
+    pub fn select(&self, batch: &RecordBatch) -> Result<RecordBatch> {
+        let Filter::Sql(p) = self else {
+            return Ok(batch.clone());
+        };
+        let value = p.physical.evaluate(batch).and_then(|v| v.into_array(batch.num_rows())).map_err(explain)?;
+        // A predicate that is the literal `null` has the type Null: no row is selected.
+        let value = if value.data_type() == &DataType::Null { cast(&value, &DataType::Boolean).map_err(arrow_err)? } else { value };
+        let mask = value
+            .as_any()
+            .downcast_ref::<BooleanArray>()
+            .ok_or_else(|| bad(format!("`{}` gives {} values, not true/false", p.text, value.data_type())))?;
+        // `filter_record_batch` drops the rows where the mask is null, as SQL `WHERE` does.
+        filter_record_batch(batch, mask).map_err(arrow_err)
     }
 }
 
@@ -152,122 +100,102 @@ fn bad(message: String) -> Error {
     Error::config("--where", message)
 }
 
-struct Parser {
-    tokens: Vec<(usize, Tok)>,
-    pos: usize,
+fn arrow_err(e: arrow::error::ArrowError) -> Error {
+    bad(e.to_string())
 }
 
-impl Parser {
-    fn keyword(&mut self, word: &str) -> bool {
-        match self.tokens.get(self.pos) {
-            Some((_, Tok::Ident(s))) if s.eq_ignore_ascii_case(word) => {
-                self.pos += 1;
-                true
-            }
-            _ => false,
+/// A DataFusion error as a `--where` error: unknown columns list the columns, syntax errors say so.
+fn explain(e: DataFusionError) -> Error {
+    match e.find_root() {
+        DataFusionError::SchemaError(s, _) => match s.as_ref() {
+            SchemaError::FieldNotFound { field, .. } => bad(unknown_column(field.name())),
+            other => bad(other.to_string()),
+        },
+        DataFusionError::Plan(m) if m.starts_with("table '") => {
+            bad(format!("{m}: a predicate reads the columns of its row only (subqueries need `pointreggpt query`)"))
         }
+        DataFusionError::SQL(p, _) => bad(format!("not a SQL expression: {}", p.to_string().trim_start_matches("sql parser error: "))),
+        other => bad(other.message().into_owned()),
     }
+}
 
-    fn next(&mut self, expected: &str) -> Result<(usize, Tok)> {
-        let t = self.tokens.get(self.pos).cloned().ok_or_else(|| bad(format!("unexpected end: expected {expected}")))?;
-        self.pos += 1;
-        Ok(t)
-    }
-
-    fn or(&mut self) -> Result<Filter> {
-        let mut f = self.and()?;
-        while self.keyword("or") {
-            f = Filter::Or(Box::new(f), Box::new(self.and()?));
+fn unknown_column(name: &str) -> String {
+    let columns: Vec<String> = pairs_schema().fields().iter().map(|f| f.name().clone()).collect();
+    let hint = match name {
+        "n_source_points" | "n_target_points" => {
+            format!("; the point count is `array_length({}_points)`", name.trim_start_matches("n_").trim_end_matches("_points"))
         }
-        Ok(f)
-    }
-
-    fn and(&mut self) -> Result<Filter> {
-        let mut f = self.primary()?;
-        while self.keyword("and") {
-            f = Filter::And(Box::new(f), Box::new(self.primary()?));
-        }
-        Ok(f)
-    }
-
-    fn primary(&mut self) -> Result<Filter> {
-        let (at, tok) = self.next("a column name or `(`")?;
-        let name = match tok {
-            Tok::Open => {
-                let f = self.or()?;
-                return match self.next("`)`")? {
-                    (_, Tok::Close) => Ok(f),
-                    (at, t) => Err(bad(format!("unexpected {} at position {at}: expected `)`", t.show()))),
-                };
-            }
-            Tok::Ident(name) => name,
-            t => return Err(bad(format!("unexpected {} at position {at}: expected a column name or `(`", t.show()))),
-        };
-        let column = COLUMNS.iter().find(|(n, _)| n.eq_ignore_ascii_case(&name)).map(|(_, c)| *c).ok_or_else(|| {
-            let names: Vec<&str> = COLUMNS.iter().map(|(n, _)| *n).collect();
-            bad(format!("unknown column `{name}` at position {at} (columns: {})", names.join(", ")))
-        })?;
-        let op = match self.next("a comparison operator")? {
-            (_, Tok::Op(op)) => op,
-            (at, t) => return Err(bad(format!("unexpected {} at position {at}: expected a comparison (=, !=, <, <=, >, >=) after `{name}`", t.show()))),
-        };
-        let literal = match (self.next("a value")?, column.is_text()) {
-            ((at, Tok::Text(s)), true) => {
-                if column == Column::Status && Status::parse(&s).is_none() {
-                    return Err(bad(format!("unknown status '{s}' at position {at} (ok, low_overlap, too_few_points, input_error)")));
-                }
-                Literal::Text(s)
-            }
-            ((_, Tok::Number(v)), false) => Literal::Number(v),
-            ((at, t), text) => {
-                let want = if text { "a quoted text such as 'ok'" } else { "a number" };
-                return Err(bad(format!("column `{}` compares with {want}; found {} at position {at}", column.name(), t.show())));
-            }
-        };
-        Ok(Filter::Compare(column, op, literal))
-    }
+        _ => String::new(),
+    };
+    format!("unknown column `{name}`{hint} (columns: {}; text values are quoted: 'ok')", columns.join(", "))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::export::tests_support::empty_row;
+    use crate::geometry::Point;
+    use crate::shards::{batch_to_pairs, pairs_to_batch, PairRow, Status};
 
-    fn row(status: Status, scene: &str, ov: f64, n: usize) -> PairRow {
-        let mut r = crate::export::tests_support::empty_row();
-        r.status = status;
-        r.scene = scene.into();
-        r.overlap_source = ov;
-        r.source_points = vec![crate::geometry::Point::origin(); n];
+    fn row(key: &str, status: Status, scene: &str, ov: f64, n: usize) -> PairRow {
+        let mut r = empty_row();
+        (r.pair_key, r.status, r.scene, r.overlap_source) = (key.into(), status, scene.into(), ov);
+        r.source_points = vec![Point::origin(); n];
         r
     }
 
-    #[test]
-    fn parses_and_evaluates_with_precedence() {
-        let f = Filter::parse("status = 'ok' and overlap_source >= 0.3 or scene = 'b'").unwrap();
-        assert!(f.matches(&row(Status::Ok, "a", 0.3, 0)));
-        assert!(!f.matches(&row(Status::Ok, "a", 0.29, 0)));
-        assert!(f.matches(&row(Status::LowOverlap, "b", 0.0, 0)));
-        let g = Filter::parse("STATUS == \"ok\" AND (scene = 'a' or scene='b') and n_source_points > 2").unwrap();
-        assert!(g.matches(&row(Status::Ok, "b", 0.0, 3)));
-        assert!(!g.matches(&row(Status::Ok, "c", 0.0, 3)));
-        assert!(!g.matches(&row(Status::Ok, "a", 0.0, 2)));
-        assert_eq!(Filter::parse("  ").unwrap(), Filter::All);
-        assert!(Filter::parse("scene <> 'it''s'").unwrap().matches(&row(Status::Ok, "a", 0.0, 0)));
-        assert!(Filter::parse("overlap_source < -1e-3").unwrap().matches(&row(Status::Ok, "a", -0.5, 0)));
+    /// The keys of `rows` that `predicate` selects, through a batch as the exporter does.
+    fn selected(predicate: &str, rows: &[PairRow]) -> Vec<String> {
+        let batch = Filter::parse(predicate).unwrap().select(&pairs_to_batch(rows).unwrap()).unwrap();
+        batch_to_pairs(&batch).unwrap().into_iter().map(|r| r.pair_key).collect()
+    }
+
+    fn rows() -> Vec<PairRow> {
+        vec![
+            row("a#0", Status::Ok, "a", 0.3, 0),
+            row("a#1", Status::Ok, "a", 0.29, 3),
+            row("b#0", Status::LowOverlap, "b", 0.0, 2),
+            row("b#1", Status::Ok, "b", f64::NAN, 3),
+            row("c#0", Status::Ok, "c", -0.5, 3),
+        ]
     }
 
     #[test]
-    fn errors_name_the_column_or_token() {
+    fn sql_precedence_and_operators() {
+        let rows = rows();
+        // `and` binds tighter than `or`.
+        assert_eq!(selected("status = 'ok' and overlap_source >= 0.3 or scene = 'b'", &rows), ["a#0", "b#0", "b#1"]);
+        assert_eq!(selected("status = 'ok' and (overlap_source >= 0.3 or scene = 'b')", &rows), ["a#0", "b#1"]);
+        // Keywords and names are case-insensitive; columns may be qualified with the table.
+        assert_eq!(selected("STATUS = 'ok' AND pairs.Scene IN ('a', 'b') AND array_length(source_points) > 2", &rows), ["a#1", "b#1"]);
+        assert_eq!(selected("not scene in ('a', 'c')", &rows), ["b#0", "b#1"]);
+        assert_eq!(selected("pair_key like '%#0' and scene <> 'it''s'", &rows), ["a#0", "b#0", "c#0"]);
+        assert_eq!(selected("overlap_source < -1e-3", &rows), ["c#0"]);
+        assert_eq!(selected("unit_index = 0", &rows).len(), 5);
+        // Null is "not selected"; NaN is a value (DataFusion orders it above every number).
+        assert!(selected("null", &rows).is_empty());
+        assert_eq!(selected("nullif(scene, 'a') = scene", &rows), ["b#0", "b#1", "c#0"]);
+        assert_eq!(selected("isnan(overlap_source)", &rows), ["b#1"]);
+        assert_eq!(selected("overlap_source > 1e300", &rows), ["b#1"]);
+        assert!(matches!(Filter::parse("  ").unwrap(), Filter::All));
+        assert_eq!(Filter::parse_opt(Some("scene = 'a'")).unwrap().sql(), Some("scene = 'a'"));
+    }
+
+    #[test]
+    fn errors_name_the_column_or_the_problem() {
         let e = |s: &str| Filter::parse(s).unwrap_err().to_string();
-        assert!(e("overlap > 0.3").contains("unknown column `overlap`"), "{}", e("overlap > 0.3"));
-        assert!(e("status = ok").contains("quoted text"));
-        assert!(e("overlap_source = 'x'").contains("a number"));
-        assert!(e("status = 'fine'").contains("unknown status 'fine'"));
-        assert!(e("status = 'ok' and").contains("unexpected end"));
-        assert!(e("(status = 'ok'").contains("expected `)`"));
-        assert!(e("status = 'ok' scene").contains("`scene` at position 14"));
-        assert!(e("scene ~ 'a'").contains("unexpected character `~`"));
-        assert!(e("scene = 'a").contains("unterminated string"));
-        assert!(e("x = 1").contains("--where"));
+        let m = e("overlap > 0.3");
+        assert!(m.contains("--where") && m.contains("unknown column `overlap`") && m.contains("overlap_source, overlap_target"), "{m}");
+        assert!(e("status = ok").contains("unknown column `ok`"));
+        assert!(e("n_target_points > 3").contains("array_length(target_points)"));
+        assert!(e("status = 'ok' and").contains("not a SQL expression"), "{}", e("status = 'ok' and"));
+        assert!(e("(status = 'ok'").contains("not a SQL expression"));
+        assert!(e("status = 'ok' scene").contains("not a SQL expression"));
+        assert!(e("status = 'ok'; drop table pairs").contains("not a SQL expression"));
+        let m = e("overlap_source + 1");
+        assert!(m.contains("Float64 values, not true/false"), "{m}");
+        assert!(e("scene").contains("not true/false"));
+        assert!(e("count(*) > 1").contains("aggregate or window function"));
+        assert!(e("unit_index in (select unit_index from pairs)").contains("subqueries need `pointreggpt query`"));
     }
 }

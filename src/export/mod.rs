@@ -1,6 +1,6 @@
 //! Export a dataset's pairs to the layouts registration trainers read: the PointRegGPT authors' layout
 //! (`pointreggpt`), GeoTransformer's 3DMatch pickle + `.npy` (`geotransformer`), or plain PLY pairs
-//! (`ply`). Rows stream shard by shard, filtered by a `--where` predicate ([`filter`]) and a limit.
+//! (`ply`). Rows stream shard by shard, selected by a SQL `--where` predicate ([`filter`]) and a limit.
 //!
 //! The training formats take `ok` rows only (others that match the filter are counted as skipped);
 //! `ply` writes every matching row, so rejected pairs can be inspected too. Pairs are numbered in export
@@ -13,7 +13,6 @@ pub mod pickle;
 pub mod pointreggpt;
 pub mod ply;
 pub mod rows;
-mod tokens;
 
 use crate::error::{Error, Result};
 use crate::shards::dataset::Dataset;
@@ -50,7 +49,8 @@ pub struct ExportOptions {
 /// What an export did.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct ExportReport {
-    /// Committed rows read.
+    /// Committed rows read: every row of the shards read (an export stopped by its limit reads on to the
+    /// end of that shard).
     pub rows_read: u64,
     /// Rows that matched the filter.
     pub matched: u64,
@@ -82,12 +82,7 @@ pub fn export(ds: &Dataset, opts: &ExportOptions) -> Result<ExportReport> {
     };
     let bar = crate::runtime::progress::bar(rows::committed_row_count(ds)?, opts.progress, "export");
     let mut report = ExportReport::default();
-    rows::for_each_row(ds, |row| {
-        bar.inc(1);
-        report.rows_read += 1;
-        if !opts.filter.matches(&row) {
-            return Ok(true);
-        }
+    report.rows_read = rows::for_each_row(ds, &opts.filter, &bar, |row| {
         report.matched += 1;
         if !writer.accepts(&row) {
             report.skipped += 1;

@@ -1,33 +1,45 @@
-//! Streaming the committed rows of a dataset shard by shard (so memory holds one shard), in unit order,
-//! and the file naming the export and preview commands share.
+//! Streaming the committed rows a `--where` filter selects, shard by shard (so memory holds one shard), in
+//! unit order, and the file naming the export and preview commands share.
 
 use crate::error::{Error, Result};
 use crate::shards::dataset::{Dataset, PAIRS_TABLE};
 use crate::shards::pairs::batch_to_pairs;
 use crate::shards::row::PairRow;
+use crate::shards::schema::pairs_schema_mismatch;
+use super::Filter;
+use indicatif::ProgressBar;
 
 /// Rows of the committed `pairs` shards, from their manifest entries.
 pub fn committed_row_count(ds: &Dataset) -> Result<u64> {
     Ok(ds.committed(PAIRS_TABLE)?.values().map(|e| e.rows).sum())
 }
 
-/// Calls `f` with every committed row, in `unit_index` order (shards hold consecutive unit ranges),
-/// reading one shard at a time; stops early when `f` returns `Ok(false)`.
-pub fn for_each_row(ds: &Dataset, mut f: impl FnMut(PairRow) -> Result<bool>) -> Result<()> {
+/// Calls `f` with every committed row that `filter` selects, in `unit_index` order (shards hold
+/// consecutive unit ranges), reading one shard at a time: the predicate runs on the shard's batches and
+/// only the selected rows are decoded into [`PairRow`]s. Stops early when `f` returns `Ok(false)`.
+/// `bar` advances by each shard's rows; returns the rows read (every row of the shards read).
+pub fn for_each_row(ds: &Dataset, filter: &Filter, bar: &ProgressBar, mut f: impl FnMut(PairRow) -> Result<bool>) -> Result<u64> {
+    let mut read = 0;
     for entry in ds.committed(PAIRS_TABLE)?.values() {
+        let path = ds.root().join("shards").join(&entry.file);
         let mut rows = Vec::new();
         for batch in ds.read_shard_batches(entry)? {
-            let path = ds.root().join("shards").join(&entry.file);
-            rows.extend(batch_to_pairs(&batch).map_err(|e| Error::input(&path, e.to_string()))?);
+            if let Some(m) = pairs_schema_mismatch(&batch.schema()) {
+                return Err(Error::input(&path, format!("not a pairs/1 shard: {m}")));
+            }
+            let selected = filter.select(&batch)?;
+            rows.extend(batch_to_pairs(&selected).map_err(|e| Error::input(&path, e.to_string()))?);
         }
+        read += entry.rows;
+        bar.inc(entry.rows);
         rows.sort_by_key(|r| r.unit_index);
         for row in rows {
             if !f(row)? {
-                return Ok(());
+                return Ok(read);
             }
         }
     }
-    Ok(())
+    Ok(read)
 }
 
 /// A file-name-safe form of a key: characters other than ASCII letters, digits, `.`, `-` and `_`

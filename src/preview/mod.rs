@@ -30,20 +30,16 @@ pub struct PreviewOptions {
 }
 
 /// Writes `<out>/<pair key, sanitized>.png` for the first `limit` rows matching the filter (unit
-/// order); returns the files written.
+/// order); returns the files written. Only the matching rows are decoded.
 pub fn write_previews(ds: &Dataset, opts: &PreviewOptions) -> Result<Vec<PathBuf>> {
     std::fs::create_dir_all(&opts.out).map_err(|e| Error::io(&opts.out, e))?;
-    let bar = progress_bar(committed_row_count(ds)?, opts.progress, "preview");
     let mut used = HashSet::new();
     let mut files = Vec::new();
     if opts.limit == 0 {
         return Ok(files);
     }
-    for_each_row(ds, |row| {
-        bar.inc(1);
-        if !opts.filter.matches(&row) {
-            return Ok(true);
-        }
+    let bar = progress_bar(committed_row_count(ds)?, opts.progress, "preview");
+    for_each_row(ds, &opts.filter, &bar, |row| {
         let path = opts.out.join(format!("{}.png", unique_name(&mut used, &row.pair_key, row.unit_index)));
         render_pair(&row)?.write_png(&path)?;
         files.push(path);
@@ -53,19 +49,11 @@ pub fn write_previews(ds: &Dataset, opts: &PreviewOptions) -> Result<Vec<PathBuf
     Ok(files)
 }
 
-/// Counts the rows of `ds` matching `filter`.
-pub fn collect_stats(ds: &Dataset, filter: &Filter, progress: bool) -> Result<Stats> {
-    let bar = progress_bar(committed_row_count(ds)?, progress, "stats");
-    let mut stats = Stats::default();
-    for_each_row(ds, |row| {
-        bar.inc(1);
-        if filter.matches(&row) {
-            stats.add(&row);
-        }
-        Ok(true)
-    })?;
-    bar.finish_and_clear();
-    Ok(stats)
+/// Counts the rows of `ds` matching `filter` with one SQL aggregate over the committed shards
+/// ([`stats::counts_sql`]): no row is decoded.
+pub fn collect_stats(ds: &Dataset, filter: &Filter) -> Result<Stats> {
+    let batches = crate::query::run_query(ds.root(), &stats::counts_sql(filter.sql()))?;
+    Stats::from_counts(&batches)
 }
 
 /// Writes `stats.txt` and `stats.png` into `out` (created); returns the text.

@@ -1,9 +1,14 @@
 //! Dataset statistics: rows by status (the reject reasons) and the overlap histograms of the `ok`
-//! pairs (10 bins over [0, 1], `overlap_source` and `overlap_target`), as a text table and a bar plot.
+//! pairs (10 bins over [0, 1], `overlap_source` and `overlap_target`), counted by one SQL aggregate
+//! ([`counts_sql`]) and shown as a text table and a bar plot.
 
 use super::canvas::{text_width, Canvas, Rgb};
 use super::colormap::{BACKGROUND, TEXT};
-use crate::shards::row::{PairRow, Status};
+use crate::error::{Error, Result};
+use crate::shards::row::Status;
+use arrow::array::{Array, Int64Array, RecordBatch, StringArray};
+use arrow::compute::cast;
+use arrow::datatypes::DataType;
 use std::collections::BTreeMap;
 use std::fmt::Write;
 
@@ -28,6 +33,29 @@ pub fn overlap_bin(v: f64) -> usize {
     }
 }
 
+/// [`overlap_bin`] of `column` in SQL: NaN and values ≤ 0 in bin 0 (NaN first: DataFusion orders it
+/// above every number), then `min(floor(10·v), 9)`.
+fn bin_sql(column: &str) -> String {
+    format!(
+        "case when isnan({column}) or {column} <= 0 then 0 when {column} * 10 >= 9 then 9 \
+         else cast(floor({column} * 10) as bigint) end"
+    )
+}
+
+/// The aggregate `stats` runs over the `pairs` table: `scene, status, source_bin, target_bin, n`, the
+/// rows per scene, status and pair of overlap bins, of the rows where `predicate` (SQL) holds.
+pub fn counts_sql(predicate: Option<&str>) -> String {
+    // The predicate stands on lines of its own, so a `--` comment at its end stops there.
+    let filter = predicate.map_or(String::new(), |p| format!("where (\n{p}\n)\n"));
+    format!(
+        "select scene, status, source_bin, target_bin, count(*) as n from (\n\
+         select scene, status, {} as source_bin, {} as target_bin from pairs\n{filter}) as binned\n\
+         group by scene, status, source_bin, target_bin",
+        bin_sql("overlap_source"),
+        bin_sql("overlap_target")
+    )
+}
+
 /// Counts over a set of rows.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Counts {
@@ -39,11 +67,11 @@ pub struct Counts {
 }
 
 impl Counts {
-    fn add(&mut self, row: &PairRow) {
-        self.by_status[STATUSES.iter().position(|s| *s == row.status).expect("known status")] += 1;
-        if row.status == Status::Ok {
-            self.hist_source[overlap_bin(row.overlap_source)] += 1;
-            self.hist_target[overlap_bin(row.overlap_target)] += 1;
+    fn add(&mut self, status: Status, source_bin: usize, target_bin: usize, rows: u64) {
+        self.by_status[STATUSES.iter().position(|s| *s == status).expect("every status is listed")] += rows;
+        if status == Status::Ok {
+            self.hist_source[source_bin] += rows;
+            self.hist_target[target_bin] += rows;
         }
     }
 
@@ -65,10 +93,32 @@ fn bin_label(b: usize) -> String {
 }
 
 impl Stats {
-    /// Adds one row.
-    pub fn add(&mut self, row: &PairRow) {
-        self.total.add(row);
-        self.per_scene.entry(row.scene.clone()).or_default().add(row);
+    /// Adds `rows` rows of `scene` with `status` whose overlaps fall in the given bins ([`overlap_bin`]);
+    /// a bin past the last is an error.
+    pub fn add(&mut self, scene: &str, status: Status, source_bin: usize, target_bin: usize, rows: u64) -> Result<()> {
+        if source_bin >= BINS || target_bin >= BINS {
+            return Err(Error::Internal(format!("stats: overlap bins {source_bin}, {target_bin} (of {BINS})")));
+        }
+        self.total.add(status, source_bin, target_bin, rows);
+        self.per_scene.entry(scene.to_string()).or_default().add(status, source_bin, target_bin, rows);
+        Ok(())
+    }
+
+    /// The counts from the result of [`counts_sql`].
+    pub fn from_counts(batches: &[RecordBatch]) -> Result<Stats> {
+        let mut stats = Stats::default();
+        for b in batches {
+            let (scene, status) = (column::<StringArray>(b, 0, DataType::Utf8)?, column::<StringArray>(b, 1, DataType::Utf8)?);
+            let [source_bin, target_bin, n] = [2, 3, 4].map(|i| column::<Int64Array>(b, i, DataType::Int64));
+            let (source_bin, target_bin, n) = (source_bin?, target_bin?, n?);
+            let bin = |v: i64| usize::try_from(v).unwrap_or(BINS);
+            for r in 0..b.num_rows() {
+                let st = Status::parse(status.value(r))
+                    .ok_or_else(|| Error::Parquet(format!("stats: unknown status '{}' in the pairs table", status.value(r))))?;
+                stats.add(scene.value(r), st, bin(source_bin.value(r)), bin(target_bin.value(r)), n.value(r) as u64)?;
+            }
+        }
+        Ok(stats)
     }
 
     /// The text report: rows by status and the overlap histograms, then per scene if asked.
@@ -159,6 +209,14 @@ impl Stats {
     }
 }
 
+/// Column `i` of a counts batch, cast to `data_type` and read as `A`.
+fn column<A: Array + Clone + 'static>(b: &RecordBatch, i: usize, data_type: DataType) -> Result<A> {
+    let bad = |m: String| Error::Internal(format!("stats: column {i} of the counts: {m}"));
+    let c = b.columns().get(i).ok_or_else(|| bad("missing".into()))?;
+    let c = cast(c, &data_type).map_err(|e| bad(e.to_string()))?;
+    c.as_any().downcast_ref::<A>().cloned().ok_or_else(|| bad(format!("not {data_type}")))
+}
+
 /// Axes of a bar chart with integer ticks 0, max/2 and max on the left.
 fn axes(c: &mut Canvas, x: i64, top: i64, width: i64, bottom: i64, max: u64) {
     c.fill_rect(x - 1, top - 4, 1, bottom - top + 5, AXIS);
@@ -188,26 +246,66 @@ fn bar(c: &mut Canvas, x: i64, w: i64, bottom: i64, plot_h: i64, n: u64, max: u6
 mod tests {
     use super::*;
     use crate::export::tests_support::empty_row;
+    use datafusion::prelude::SessionContext;
 
     #[test]
     fn counts_bins_and_tables() {
         assert_eq!([0.0, 0.05, 0.1, 0.3, 0.7, 0.99, 1.0, -1.0].map(overlap_bin), [0, 0, 1, 3, 7, 9, 9, 0]);
         let mut st = Stats::default();
         for (status, scene, ov) in [(Status::Ok, "a", 0.35), (Status::Ok, "b", 1.0), (Status::LowOverlap, "a", 0.05)] {
-            let mut r = empty_row();
-            (r.status, r.scene, r.overlap_source, r.overlap_target) = (status, scene.into(), ov, ov / 2.0);
-            st.add(&r);
+            st.add(scene, status, overlap_bin(ov), overlap_bin(ov / 2.0), 1).unwrap();
         }
         assert_eq!(st.total.by_status, [2, 1, 0, 0]);
         assert_eq!(st.total.hist_source[3], 1);
         assert_eq!(st.total.hist_source[9], 1);
         assert_eq!(st.total.hist_target[1], 1);
         assert_eq!(st.per_scene["a"].by_status, [1, 1, 0, 0]);
+        assert!(st.add("a", Status::Ok, BINS, 0, 1).is_err());
         let text = st.table(true);
         assert!(text.contains("ok                       2\nlow_overlap              1\n"), "{text}");
         assert!(text.contains("[0.9, 1.0]"));
         assert!(text.contains("rows by status per scene"));
         let plot = st.plot();
         assert_eq!((plot.width, plot.height), PLOT_SIZE);
+    }
+
+    /// The SQL aggregate over a batch of rows, as `stats` runs it over the shards.
+    fn sql_stats(rows: &[crate::shards::PairRow], predicate: Option<&str>) -> Stats {
+        let runtime = tokio::runtime::Builder::new_current_thread().build().unwrap();
+        let batches = runtime.block_on(async {
+            let ctx = SessionContext::new();
+            ctx.register_batch("pairs", crate::shards::pairs_to_batch(rows).unwrap()).unwrap();
+            ctx.sql(&counts_sql(predicate)).await.unwrap().collect().await.unwrap()
+        });
+        Stats::from_counts(&batches).unwrap()
+    }
+
+    #[test]
+    fn the_sql_bins_are_overlap_bin() {
+        let values = [
+            0.0, -0.0, 0.05, 0.09999999999999999, 0.1, 0.29, 0.3, 0.6, 0.7, 0.8999999999999999, 0.9, 0.99, 1.0,
+            1.5, -1.0, 1e-300, f64::NAN, f64::INFINITY, f64::NEG_INFINITY,
+        ];
+        // Every value in an `ok` row of its own scene (so the per-scene counts show the bin of each value),
+        // then one rejected row per other status (not in the histograms).
+        let cases = values.iter().enumerate().map(|(i, v)| (format!("v{i:02}"), Status::Ok, *v));
+        let rejected = STATUSES[1..].iter().enumerate().map(|(i, s)| (format!("r{i}"), *s, 0.5));
+        let mut rows = Vec::new();
+        let mut want = Stats::default();
+        let mut want_even = Stats::default();
+        for (i, (scene, status, v)) in cases.chain(rejected).enumerate() {
+            let target = values[(i + 7) % values.len()];
+            let mut r = empty_row();
+            (r.scene, r.status, r.overlap_source, r.overlap_target) = (scene.clone(), status, v, target);
+            (r.pair_key, r.unit_index) = (format!("{scene}#0"), i as u64);
+            want.add(&scene, status, overlap_bin(v), overlap_bin(target), 1).unwrap();
+            if i % 2 == 0 {
+                want_even.add(&scene, status, overlap_bin(v), overlap_bin(target), 1).unwrap();
+            }
+            rows.push(r);
+        }
+        assert_eq!(sql_stats(&rows, None), want);
+        let even = "unit_index % 2 = 0 -- a comment stops at the end of the predicate";
+        assert_eq!(sql_stats(&rows, Some(even)), want_even);
     }
 }
