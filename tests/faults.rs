@@ -64,10 +64,10 @@ fn manifest_files(dataset: &Path, table: &str) -> usize {
 /// the dataset's creation to mid-shard or after the end. With such delays alone, whether any kill lands
 /// mid-build depends on the machine's speed and load: on 2 shared cores at a load average of 6, a fresh
 /// build commits its first shard after 0.7 s and its last after 2.9 s, the labels run after 1.2 s and
-/// 2.0 s, so on a machine twice as fast a third of the delays come after a whole labels run, and on a
-/// slow one the early delays come before any commit. So even-numbered kills, the first one included,
+/// 2.0 s, so on a machine twice as fast a quarter of the delays come after a whole labels run, and on
+/// a slow one the early delays come before any commit. So even-numbered kills, the first one included,
 /// wait until the run has committed a shard of its own and then come a random 0..150 ms later, less than
-/// the rest of the first run takes (11 shards in 2.2 s, 4 windows in 0.8 s here): they land mid-build
+/// the rest of the first run takes (11 shards in 2.1 s, 4 windows in 0.8 s here): they land mid-build
 /// on any machine that is not five times faster, however loaded. The test asserts that at least one
 /// kill did (the process died of the signal, with 0 < committed < total shards after it).
 fn kill_repeatedly(sub: &str, config: &Path, out: &Path, table: &str, kills: usize, total: usize, reference: &BTreeMap<(u64, u32), String>) {
