@@ -600,17 +600,77 @@ fn a_torchscript_denoiser_samples_like_the_native_one() {
     assert!(err.to_string().contains("denoiser.pt"), "{err}");
 }
 
+/// A shipped pipeline config with its relative model paths resolved against the repository root (where
+/// the README runs them), so the test needs no change of the process-wide working directory.
+fn shipped_pipeline(name: &str) -> pointreggpt::Result<BuildConfig> {
+    use pointreggpt::correction::CorrectionConfig;
+    use pointreggpt::inpainting::InpaintConfig;
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let text = std::fs::read_to_string(root.join("pipelines").join(name)).unwrap();
+    let mut c = BuildConfig::from_toml(&text, name)?;
+    let resolve = |p: ModelPath| ModelPath::new(root.join(p.as_path()).to_str().unwrap());
+    for method in [&mut c.correct.condition, &mut c.correct.output] {
+        if let CorrectionConfig::Unet { checkpoint, .. } = method {
+            *checkpoint = resolve(*checkpoint);
+        }
+    }
+    if let InpaintConfig::Diffusion(d) = &mut c.inpaint {
+        d.checkpoint = resolve(d.checkpoint);
+    }
+    Ok(c)
+}
+
 #[test]
 fn the_shipped_pipelines_validate_and_the_paper_one_names_its_missing_models() {
-    // Relative model paths resolve against the working directory: the repository root, as in the README.
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    std::env::set_current_dir(root).unwrap();
     for name in ["demo.toml", "paper-3dmatch-classical.toml"] {
-        let text = std::fs::read_to_string(root.join("pipelines").join(name)).unwrap();
-        let c = BuildConfig::from_toml(&text, name).unwrap_or_else(|e| panic!("{name}: {e}"));
-        c.validate().unwrap_or_else(|e| panic!("{name}: {e}"));
+        shipped_pipeline(name).and_then(|c| c.validate()).unwrap_or_else(|e| panic!("{name}: {e}"));
     }
-    let text = std::fs::read_to_string(root.join("pipelines/paper-3dmatch.toml")).unwrap();
-    let err = BuildConfig::from_toml(&text, "paper-3dmatch.toml").and_then(|c| c.validate()).unwrap_err().to_string();
+    let err = shipped_pipeline("paper-3dmatch.toml").and_then(|c| c.validate()).unwrap_err().to_string();
     assert!(err.contains("models/correction-paper.safetensors") || err.contains("models/diffusion-paper.safetensors"), "{err}");
+}
+
+/// An x0 predictor that records the time step of every call and predicts its input.
+struct CountingModel(std::sync::Arc<std::sync::Mutex<Vec<i64>>>);
+
+impl pointreggpt::diffusion::X0Model for CountingModel {
+    fn predict_x0(&self, x: &Tensor, t: &Tensor, _intrinsics: &Tensor) -> Tensor {
+        self.0.lock().unwrap().push(t.int64_value(&[0]));
+        x.shallow_clone()
+    }
+    fn size_multiple(&self) -> usize {
+        1
+    }
+}
+
+#[test]
+fn a_push_pull_start_runs_exactly_the_configured_steps_and_refuses_more_than_it_can() {
+    let dir = tempfile::tempdir().unwrap();
+    let checkpoint = ModelPath::new(save_untrained(dir.path(), 2).to_str().unwrap());
+    let config = |steps| DiffusionInpaintConfig { checkpoint, steps, eta: 1.0, start: Start::PushPull, start_step: 4, batch: 1, resample: None };
+    // From step 4 the chain has 5 steps left (4, 3, 2, 1, 0): 6 is refused, naming the key and both values.
+    let err = config(6).validate("inpaint").unwrap_err().to_string();
+    for part in ["`inpaint`", "steps = 6", "start_step = 4", "at most start_step + 1 = 5"] {
+        assert!(err.contains(part), "{part:?} missing from: {err}");
+    }
+    // `eval inpaint` refuses the same combination of its flags before reading anything.
+    let o = support::bin()
+        .args(["eval", "inpaint", "/nonexistent", "--steps", "30", "--start-step", "20", "--out"])
+        .arg(dir.path().join("x.csv"))
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && stderr.contains("--steps") && stderr.contains("--start-step + 1 = 21"), "{stderr}");
+    // Every valid count runs exactly that many model calls, at distinct steps from 4 down.
+    let (w, h) = (16u32, 12u32);
+    let mut r = Rng::new(5);
+    let d = DepthMap::new(w, h, (0..w * h).map(|_| r.uniform_range(0.6, 4.0) as f32).collect()).unwrap();
+    let known: Vec<bool> = (0..w * h).map(|_| r.uniform() < 0.5).collect();
+    let ctx = InpaintContext { intrinsics: Intrinsics::new(15.0, 15.0, 8.0, 6.0, w, h).unwrap(), seed: 1 };
+    for (steps, want) in [(1, vec![4]), (3, vec![4, 2, 0]), (5, vec![4, 3, 2, 1, 0])] {
+        config(steps).validate("inpaint").unwrap_or_else(|e| panic!("{steps} steps: {e}"));
+        let calls = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+        let model = Box::new(CountingModel(calls.clone()));
+        DiffusionInpainter::from_model(model, config(steps).sampler(), Device::Cpu).inpaint(&d, &known, &ctx);
+        assert_eq!(*calls.lock().unwrap(), want, "{steps} steps");
+    }
 }

@@ -45,24 +45,64 @@ fn assert_verified(dataset: &Path) {
     assert!(report.is_ok() && report.orphans.is_empty() && report.stale_temps.is_empty() && report.other_temps.is_empty(), "{report}");
 }
 
-/// Kills `sub` at `kills` random moments, then lets it finish; the result must equal `reference`.
-fn kill_repeatedly(sub: &str, config: &Path, out: &Path, table: &str, kills: usize, max_delay_ms: f64, reference: &BTreeMap<(u64, u32), String>) {
+/// Shards of `table` committed in `dataset` (0 before the dataset exists).
+fn committed_shards(dataset: &Path, table: &str) -> usize {
+    Dataset::open(dataset).and_then(|ds| ds.committed(table)).map(|c| c.len()).unwrap_or(0)
+}
+
+/// Manifest files of `table` in `dataset`, counted while a build may be writing them.
+fn manifest_files(dataset: &Path, table: &str) -> usize {
+    let prefix = format!("{table}-");
+    std::fs::read_dir(dataset.join("manifest"))
+        .map(|d| d.filter_map(|e| e.ok()).filter(|e| e.file_name().to_string_lossy().starts_with(&prefix)).count())
+        .unwrap_or(0)
+}
+
+/// Kills `sub` `kills` times, then lets it finish; the result must equal `reference` (`total` shards).
+///
+/// Odd-numbered kills come a random 50..1500 ms after the start: any moment, from start-up and
+/// the dataset's creation to mid-shard or after the end. With such delays alone, whether any kill lands
+/// mid-build depends on the machine's speed and load: on 2 shared cores at a load average of 6, a fresh
+/// build commits its first shard after 0.7 s and its last after 2.9 s, the labels run after 1.2 s and
+/// 2.0 s, so on a machine twice as fast a quarter of the delays come after a whole labels run, and on
+/// a slow one the early delays come before any commit. So even-numbered kills, the first one included,
+/// wait until the run has committed a shard of its own and then come a random 0..150 ms later, less than
+/// the rest of the first run takes (11 shards in 2.1 s, 4 windows in 0.8 s here): they land mid-build
+/// on any machine that is not five times faster, however loaded. The test asserts that at least one
+/// kill did (the process died of the signal, with 0 < committed < total shards after it).
+fn kill_repeatedly(sub: &str, config: &Path, out: &Path, table: &str, kills: usize, total: usize, reference: &BTreeMap<(u64, u32), String>) {
+    use std::os::unix::process::ExitStatusExt;
     let mut rng = Rng::new(2024);
-    for _ in 0..kills {
+    let mut log = Vec::new(); // (kill, landed before the run ended, committed shards after it)
+    for i in 0..kills {
         let mut child = command(sub, config, out, &[]).spawn().unwrap();
-        std::thread::sleep(Duration::from_millis(rng.uniform_range(50.0, max_delay_ms) as u64));
+        if i % 2 == 0 {
+            let (before, t0) = (manifest_files(out, table), std::time::Instant::now());
+            while manifest_files(out, table) == before && child.try_wait().unwrap().is_none() {
+                assert!(t0.elapsed() < Duration::from_secs(120), "{sub}: no shard committed in 2 minutes");
+                std::thread::sleep(Duration::from_millis(5));
+            }
+            std::thread::sleep(Duration::from_millis(rng.below(150)));
+        } else {
+            std::thread::sleep(Duration::from_millis(rng.uniform_range(50.0, 1500.0) as u64));
+        }
         let _ = child.kill();
-        child.wait().unwrap();
+        let status = child.wait().unwrap();
+        let committed = committed_shards(out, table);
+        log.push((i, status.signal() == Some(9), committed));
         if out.join("dataset.toml").exists() {
             for (k, d) in digests(out, table) {
                 assert_eq!(Some(&d), reference.get(&k), "{sub}: unit {k:?} differs after a kill");
             }
         }
     }
+    let mid_build = log.iter().filter(|(_, killed, c)| *killed && *c > 0 && *c < total).count();
+    assert!(mid_build > 0, "{sub}: no kill landed mid-build (kill, killed, committed of {total}): {log:?}");
     let o = command(sub, config, out, &[]).output().unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert_eq!(&digests(out, table), reference, "{sub}: final dataset differs from the uninterrupted one");
     assert_verified(out);
+    eprintln!("{sub}: {mid_build} of {kills} kills landed mid-build: {log:?}");
 }
 
 #[test]
@@ -75,7 +115,8 @@ fn twenty_random_sigkills_during_a_build_then_a_final_run_equal_an_uninterrupted
     assert!(o.status.success());
     let reference = digests(&reference_dir, "pairs");
     assert_eq!(reference.len(), 36);
-    kill_repeatedly("build", &config, &dir.path().join("killed"), "pairs", 20, 1500.0, &reference);
+    assert_eq!(committed_shards(&reference_dir, "pairs"), 12);
+    kill_repeatedly("build", &config, &dir.path().join("killed"), "pairs", 20, 12, &reference);
 }
 
 #[test]
@@ -94,7 +135,8 @@ fn ten_random_sigkills_during_labels_then_a_final_run_equal_an_uninterrupted_run
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let reference = digests(&reference_dir, "labels");
     assert_eq!(reference.len(), 10, "5 windows x 2 samples");
-    kill_repeatedly("labels", &config, &dir.path().join("killed"), "labels", 10, 1500.0, &reference);
+    assert_eq!(committed_shards(&reference_dir, "labels"), 5);
+    kill_repeatedly("labels", &config, &dir.path().join("killed"), "labels", 10, 5, &reference);
 }
 
 #[test]

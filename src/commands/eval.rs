@@ -48,7 +48,7 @@ pub struct EvalInpaintArgs {
     /// Diffusion checkpoint (`pointreggpt train diffusion --export`).
     #[arg(long, default_value = "models/diffusion-tiny.safetensors")]
     pub diffusion: PathBuf,
-    /// DDIM steps of the diffusion fill.
+    /// DDIM steps of the diffusion fill (at most --start-step + 1).
     #[arg(long, default_value_t = 50)]
     pub steps: usize,
     /// The step the `push_pull`-started diffusion rows are noised to (the official rows start from pure noise).
@@ -166,6 +166,11 @@ fn run_inpaint(a: &EvalInpaintArgs, out: &mut dyn Write) -> Result<()> {
     let w = |e: std::io::Error| Error::io("<stdout>", e);
     if a.gap == 0 || a.every == 0 {
         return Err(Error::config("--gap/--every", "must be at least 1"));
+    }
+    if a.steps > a.start_step + 1 {
+        let most = a.start_step + 1;
+        let message = format!("the push_pull-started rows can run at most --start-step + 1 = {most} steps, not {}", a.steps);
+        return Err(Error::config("--steps", message));
     }
     crate::nn::set_torch_threads(a.torch_threads)?;
     let working = WorkingConfig::default();

@@ -72,6 +72,8 @@ impl Schedule {
     }
 
     /// DDIM pairs from step `start` (instead of T − 1) down to −1: `int(linspace(−1, start, steps + 1))`.
+    /// At most `start + 1` pairs: a larger `steps` is clamped (configs refuse it, see
+    /// [`crate::inpainting::DiffusionInpaintConfig::validate`]).
     pub fn ddim_pairs_from(&self, start: usize, steps: usize) -> Vec<(i64, i64)> {
         let t_max = start.min(self.len() - 1) as f64;
         let steps = steps.clamp(1, t_max as usize + 1);

@@ -22,7 +22,7 @@ pub struct DiffusionInpaintConfig {
     /// safetensors) or a TorchScript denoiser `forward(x, t, intrinsics) → x0`, relative to the working
     /// directory.
     pub checkpoint: ModelPath,
-    /// DDIM steps (paper 250).
+    /// DDIM steps (paper 250); with `start = "push_pull"` at most `start_step + 1`.
     pub steps: usize,
     /// DDIM η (official 1.0).
     #[serde(default = "official_eta")]
@@ -82,6 +82,19 @@ impl DiffusionInpaintConfig {
         }
         if self.start_step > 999 {
             return Err(Error::config(field, "start_step must be in 0..=999"));
+        }
+        // From step s the chain has s + 1 distinct steps left (s, s − 1, …, 0); more would repeat steps.
+        if self.start == Start::PushPull && self.steps > self.start_step + 1 {
+            return Err(Error::config(
+                field,
+                format!(
+                    "steps = {} is more than a push_pull start at start_step = {} can run: at most start_step + 1 = {} \
+                     steps (lower steps or raise start_step)",
+                    self.steps,
+                    self.start_step,
+                    self.start_step + 1
+                ),
+            ));
         }
         if self.resample.is_some_and(|r| r.jump == 0 || r.repeats == 0 || r.repeats > 100) {
             return Err(Error::config(field, "resample needs jump >= 1 and repeats in 1..=100"));
