@@ -10,7 +10,7 @@ use pointreggpt::shards::dataset::Dataset;
 use pointreggpt::shards::row::Status;
 use nalgebra::{Isometry3, Vector3};
 use pointreggpt::geometry::Point;
-use pointreggpt::pipeline::config::SourceConfig;
+use pointreggpt::sources::SourceConfig;
 use pointreggpt::sources::synthetic::{Scene, SyntheticConfig, SyntheticSequence};
 use std::collections::BTreeMap;
 use std::path::Path;
