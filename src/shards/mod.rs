@@ -34,11 +34,14 @@
 //! config keys ([`Dataset::create_or_open`]).
 
 pub mod atomic;
+pub mod commit;
+pub mod config_diff;
 pub mod dataset;
 pub mod labels;
 pub mod manifest;
 pub mod pairs;
 pub mod plan;
+pub mod read;
 pub mod parquet_io;
 pub mod row;
 pub mod schema;

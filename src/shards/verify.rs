@@ -1,7 +1,8 @@
 //! `verify`: proves every committed shard is the file its manifest entry describes, and lists leftovers.
 
 use super::atomic::list_temps;
-use super::dataset::{list_files, Dataset, PAIRS_TABLE, SHARDS_DIR};
+use super::dataset::{Dataset, PAIRS_TABLE, SHARDS_DIR};
+use super::read::list_files;
 use super::manifest::{parse_shard_file_name, ManifestEntry};
 use super::parquet_io::read_parquet_file;
 use super::schema::{pairs_schema_mismatch, SCHEMA_VERSION_KEY};
