@@ -136,8 +136,7 @@ fn infer_config(path: &Path, shapes: &BTreeMap<String, Vec<i64>>, prefix: &str) 
 
 /// Every tensor of the file, by name.
 pub fn read_tensors(path: &Path) -> Result<HashMap<String, Tensor>> {
-    let all = Tensor::read_safetensors(path).map_err(|e| Error::Torch(format!("{}: {e}", path.display())))?;
-    Ok(all.into_iter().collect())
+    Ok(crate::nn::checkpoint::read_tensors(path)?.into_iter().collect())
 }
 
 /// The tensors under `prefix` (prefix stripped).
