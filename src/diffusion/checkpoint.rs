@@ -3,8 +3,8 @@
 //! configuration and training state as JSON in the header's `__metadata__` (key `pointreggpt`).
 //!
 //! Loading for sampling takes the EMA weights when present, else the online ones, else root-level keys,
-//! so the authors' checkpoint converted to safetensors (`docs/diffusion.md`) and a bare exported state
-//! dict load too; a file without our metadata has its widths inferred from the tensor shapes.
+//! so the authors' checkpoint converted by `scripts/convert-official.py diffusion` and a bare exported
+//! state dict load too; a file without our metadata has its widths inferred from the tensor shapes.
 
 use crate::error::{Error, Result};
 use crate::nn::checkpoint::{read_header, write_safetensors, META_KEY};

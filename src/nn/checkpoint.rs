@@ -1,8 +1,9 @@
 //! Correction-network checkpoints: safetensors weights under the official state-dict keys, with the
 //! configuration and training state as JSON in the header's `__metadata__` (key `pointreggpt`).
 //!
-//! A file without that metadata is read as the authors' layout (a converted `model-best.pt`, see
-//! `docs/correction.md`): the widths are inferred from the tensor shapes.
+//! A file without that metadata is read as the authors' layout (their `model-best.pt` converted by
+//! `scripts/convert-official.py correction`): the widths are inferred from the tensor shapes. Files are
+//! read and written through the `safetensors` crate; saves are atomic.
 
 use super::correction::{CorrectionNet, CorrectionNetConfig};
 use super::unet::{Preset, UnetConfig};
@@ -65,9 +66,8 @@ fn invalid(path: &Path, what: impl std::fmt::Display) -> Error {
 fn describe(e: &SafeTensorError) -> String {
     match e {
         SafeTensorError::HeaderTooSmall => "shorter than 8 bytes".into(),
-        SafeTensorError::HeaderTooLarge | SafeTensorError::InvalidHeaderLength => {
-            "the header length runs past the end of the file (truncated?)".into()
-        }
+        SafeTensorError::HeaderTooLarge => format!("header longer than {MAX_HEADER_BYTES} bytes"),
+        SafeTensorError::InvalidHeaderLength => "the header length runs past the end of the file (truncated?)".into(),
         SafeTensorError::MetadataIncompleteBuffer => "the tensor data does not match the header (truncated?)".into(),
         SafeTensorError::InvalidHeader | SafeTensorError::InvalidHeaderStart => "the header is not a JSON object".into(),
         other => format!("{other:?}"),
@@ -295,137 +295,4 @@ pub fn load_correction(path: &Path, device: Device) -> Result<(nn::VarStore, Cor
         vs.set_device(device);
     }
     Ok((vs, net, meta))
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use atomic::TempName;
-
-    fn meta(pairs: &[(&str, &str)]) -> BTreeMap<String, String> {
-        pairs.iter().map(|(k, v)| (k.to_string(), v.to_string())).collect()
-    }
-
-    fn le_bytes(values: &[f32]) -> Vec<u8> {
-        values.iter().flat_map(|v| v.to_le_bytes()).collect()
-    }
-
-    #[test]
-    fn a_round_trip_is_read_back_by_tch_and_by_the_crate() {
-        let dir = tempfile::tempdir().unwrap();
-        let p = dir.path().join("t.safetensors");
-        let a = [1.5f32, -2.0, 3.25, 0.0, 7.0, f32::MIN_POSITIVE];
-        // Saved as f32 whatever they are: an f64 tensor, a transposed (non-contiguous) view, a scalar.
-        let tensors = vec![
-            ("a.b".to_string(), Tensor::from_slice(&a).view([2, 3])),
-            ("t".to_string(), Tensor::from_slice(&a).view([2, 3]).tr()),
-            ("d".to_string(), Tensor::from_slice(&[0.1f64, 1e-3])),
-            ("s".to_string(), Tensor::from(-4.5f32)),
-        ];
-        let info = meta(&[("pointreggpt", "{\"x\": 1}"), ("k", "v")]);
-        write_safetensors(&p, &tensors, &info).unwrap();
-        let expected: BTreeMap<&str, (Vec<usize>, Vec<u8>)> = BTreeMap::from([
-            ("a.b", (vec![2, 3], le_bytes(&a))),
-            ("t", (vec![3, 2], le_bytes(&[a[0], a[3], a[1], a[4], a[2], a[5]]))),
-            ("d", (vec![2], le_bytes(&[0.1f64 as f32, 1e-3f64 as f32]))),
-            ("s", (vec![], le_bytes(&[-4.5]))),
-        ]);
-        // The crate, on the whole file.
-        let bytes = std::fs::read(&p).unwrap();
-        let (_, header) = SafeTensors::read_metadata(&bytes).unwrap();
-        assert_eq!(header.metadata().clone().unwrap(), info.clone().into_iter().collect::<HashMap<_, _>>());
-        let file = SafeTensors::deserialize(&bytes).unwrap();
-        assert_eq!(file.len(), expected.len());
-        for (name, (shape, data)) in &expected {
-            let view = file.tensor(name).unwrap();
-            assert_eq!((view.dtype(), view.shape(), view.data()), (Dtype::F32, &shape[..], &data[..]), "{name}");
-        }
-        // tch's reader.
-        for (name, t) in Tensor::read_safetensors(&p).unwrap() {
-            let (shape, data) = &expected[name.as_str()];
-            let mut got = vec![0u8; data.len()];
-            t.copy_data_u8(&mut got, t.numel());
-            assert_eq!((t.size().iter().map(|&d| d as usize).collect::<Vec<_>>(), got), (shape.clone(), data.clone()));
-        }
-        // Ours: the header alone, and the tensors.
-        let (m, shapes) = read_header(&p).unwrap();
-        assert_eq!(m, info);
-        assert_eq!(shapes.len(), 4);
-        assert_eq!(shapes["t"], vec![3, 2]);
-        for (name, t) in read_tensors(&p).unwrap() {
-            assert!(t.equal(&tensors.iter().find(|(n, _)| *n == name).unwrap().1.to_kind(Kind::Float)), "{name}");
-        }
-        // No metadata: no `__metadata__` entry at all, as the authors' converted files.
-        write_safetensors(&p, &tensors[..1], &BTreeMap::new()).unwrap();
-        let bytes = std::fs::read(&p).unwrap();
-        assert!(SafeTensors::read_metadata(&bytes).unwrap().1.metadata().is_none());
-        assert!(!String::from_utf8_lossy(&bytes).contains("__metadata__"));
-        // Only the checkpoint is in the folder: no temporary file is left behind.
-        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
-        let twice = [0, 0].map(|i| (tensors[i].0.clone(), tensors[i].1.shallow_clone()));
-        assert!(write_safetensors(&p, &twice, &info).unwrap_err().to_string().contains("`a.b` given twice"));
-    }
-
-    #[test]
-    fn corrupt_and_truncated_files_give_errors_naming_the_file() {
-        let dir = tempfile::tempdir().unwrap();
-        let good = dir.path().join("good.safetensors");
-        let t = Tensor::from_slice(&[1f32, 2.0, 3.0, 4.0]);
-        write_safetensors(&good, &[("w".into(), t)], &meta(&[("k", "v")])).unwrap();
-        let bytes = std::fs::read(&good).unwrap();
-        let header_len = 8 + u64::from_le_bytes(bytes[..8].try_into().unwrap()) as usize;
-        let mut bad_offsets = br#"{"w":{"dtype":"F32","shape":[2],"data_offsets":[0,4]}}"#.to_vec();
-        bad_offsets.resize(56, b' ');
-        let cases: Vec<(&str, Vec<u8>, &str)> = vec![
-            ("short", b"abc".to_vec(), "shorter than 8 bytes"),
-            ("cut-data", bytes[..bytes.len() - 4].to_vec(), "truncated"),
-            ("cut-header", bytes[..header_len - 3].to_vec(), "truncated"),
-            ("huge-header", [&u64::MAX.to_le_bytes()[..], &bytes[8..]].concat(), "header length"),
-            ("not-json", [&4u64.to_le_bytes()[..], b"abcd"].concat(), "not a JSON object"),
-            ("offsets", [&56u64.to_le_bytes()[..], &bad_offsets, &[0u8; 4]].concat(), "tensor `w`"),
-        ];
-        for (name, content, why) in cases {
-            let p = dir.path().join(format!("{name}.safetensors"));
-            std::fs::write(&p, &content).unwrap();
-            // tch's reader refuses them too: they are really broken.
-            assert!(Tensor::read_safetensors(&p).is_err(), "{name}");
-            for err in [read_header(&p).map(|_| ()), read_tensors(&p).map(|_| ()), read_meta(&p).map(|_| ())] {
-                let err = err.unwrap_err().to_string();
-                assert!(err.contains(&p.display().to_string()), "{name}: {err}");
-                assert!(err.contains("not a valid safetensors file"), "{name}: {err}");
-            }
-            let err = read_header(&p).unwrap_err().to_string();
-            assert!(err.contains(why), "{name}: {err}");
-        }
-    }
-
-    #[test]
-    fn a_save_interrupted_before_the_rename_leaves_the_previous_checkpoint_loadable() {
-        let dir = tempfile::tempdir().unwrap();
-        let p = dir.path().join("latest.safetensors");
-        let save = |step: &str, w: &[f32], path: &Path| {
-            write_safetensors(path, &[("w".into(), Tensor::from_slice(w))], &meta(&[("step", step)])).unwrap()
-        };
-        save("1", &[1.0, 2.0, 3.0], &p);
-        let before = std::fs::read(&p).unwrap();
-        // The save of step 2 died after writing half its temporary file (in the checkpoint's folder, under
-        // the name write_atomic gives it) and before the rename: its process no longer runs.
-        let other = tempfile::tempdir().unwrap();
-        save("2", &[4.0, 5.0, 6.0], &other.path().join("x.safetensors"));
-        let step2 = std::fs::read(other.path().join("x.safetensors")).unwrap();
-        let dead = TempName { pid: 4_194_304 + 17, ..TempName::new("latest.safetensors") };
-        let crashed = dir.path().join(dead.file_name());
-        std::fs::write(&crashed, &step2[..step2.len() / 2]).unwrap();
-        // A save of this process still running (another thread's) is not stale.
-        let running = dir.path().join(TempName::new("latest.safetensors").file_name());
-        std::fs::write(&running, b"partial").unwrap();
-        assert_eq!(std::fs::read(&p).unwrap(), before, "the target is untouched");
-        assert_eq!(read_header(&p).unwrap().0["step"], "1");
-        let w = &read_tensors(&p).unwrap()[0].1;
-        assert_eq!(Vec::<f32>::try_from(w).unwrap(), vec![1.0, 2.0, 3.0]);
-        // The next save replaces the checkpoint and removes the dead process's temporary file only.
-        save("3", &[7.0, 8.0, 9.0], &p);
-        assert_eq!(read_header(&p).unwrap().0["step"], "3");
-        assert!(!crashed.exists() && running.exists());
-    }
 }
