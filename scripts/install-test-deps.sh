@@ -1,8 +1,11 @@
 #!/usr/bin/env bash
-# Installs the Python modules the integration tests read shards with (tests/python/read_shards.py):
-# pyarrow and duckdb, pinned. `make test` runs this first.
+# Installs the Python modules the integration tests need, pinned: pyarrow and duckdb, which they read shards
+# with (tests/python/read_shards.py), and torch 2.13.0 with safetensors, which tests/checkpoints.rs saves and
+# converts the authors' kind of checkpoints with (through scripts/install-network-peers.sh: PyPI's CUDA
+# build, ~3 GB to download, 4.6 GB installed, 54 s here; it runs on the CPU). `make test` and .ci/run run
+# this first.
 #
-# Idempotent: does nothing when `import pyarrow, duckdb` already works.
+# Idempotent: installs nothing that already imports.
 # PYTHON selects the interpreter (default python3).
 set -euo pipefail
 
@@ -20,8 +23,13 @@ modules_import() {
     "$PYTHON" -c "$CHECK" >/dev/null 2>&1
 }
 
+torch_peers() {
+    PYTHON="$PYTHON" "$(dirname "$0")/install-network-peers.sh"
+}
+
 if modules_import; then
     echo "install-test-deps: already installed ($("$PYTHON" -c 'import pyarrow, duckdb; print("pyarrow", pyarrow.__version__, "duckdb", duckdb.__version__)'))"
+    torch_peers
     exit 0
 fi
 
@@ -38,4 +46,5 @@ if ! modules_import; then
     "$PYTHON" -c "$CHECK" || true
     die "pyarrow and duckdb were installed but do not import (see the error above)"
 fi
+torch_peers
 echo "install-test-deps: done"

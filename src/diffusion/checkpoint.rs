@@ -3,8 +3,8 @@
 //! configuration and training state as JSON in the header's `__metadata__` (key `pointreggpt`).
 //!
 //! Loading for sampling takes the EMA weights when present, else the online ones, else root-level keys,
-//! so the authors' checkpoint converted to safetensors (`docs/diffusion.md`) and a bare exported state
-//! dict load too; a file without our metadata has its widths inferred from the tensor shapes.
+//! so the authors' checkpoint converted by `scripts/convert-official.py diffusion` and a bare exported
+//! state dict load too; a file without our metadata has its widths inferred from the tensor shapes.
 
 use crate::error::{Error, Result};
 use crate::nn::checkpoint::{read_header, write_safetensors, META_KEY};
@@ -136,8 +136,7 @@ fn infer_config(path: &Path, shapes: &BTreeMap<String, Vec<i64>>, prefix: &str) 
 
 /// Every tensor of the file, by name.
 pub fn read_tensors(path: &Path) -> Result<HashMap<String, Tensor>> {
-    let all = Tensor::read_safetensors(path).map_err(|e| Error::Torch(format!("{}: {e}", path.display())))?;
-    Ok(all.into_iter().collect())
+    Ok(crate::nn::checkpoint::read_tensors(path)?.into_iter().collect())
 }
 
 /// The tensors under `prefix` (prefix stripped).

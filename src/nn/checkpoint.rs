@@ -1,15 +1,20 @@
 //! Correction-network checkpoints: safetensors weights under the official state-dict keys, with the
 //! configuration and training state as JSON in the header's `__metadata__` (key `pointreggpt`).
 //!
-//! A file without that metadata is read as the authors' layout (a converted `model-best.pt`, see
-//! `docs/correction.md`): the widths are inferred from the tensor shapes.
+//! A file without that metadata is read as the authors' layout (their `model-best.pt` converted by
+//! `scripts/convert-official.py correction`): the widths are inferred from the tensor shapes. Files are
+//! read and written through the `safetensors` crate; saves are atomic.
 
 use super::correction::{CorrectionNet, CorrectionNetConfig};
 use super::unet::{Preset, UnetConfig};
 use crate::error::{Error, Result};
+// The atomic-write helper the shards use (imported here only).
+use crate::shards::atomic;
+use safetensors::tensor::{Dtype, Metadata, SafeTensorError, SafeTensors, TensorInfo, View};
 use serde::{Deserialize, Serialize};
+use std::borrow::Cow;
 use std::collections::{BTreeMap, HashMap};
-use std::io::{Read, Write};
+use std::io::Read;
 use std::path::Path;
 use tch::{nn, Device, Kind, Tensor};
 
@@ -50,74 +55,136 @@ impl CheckpointMeta {
     }
 }
 
-fn torch(path: &Path, e: impl std::fmt::Display) -> Error {
-    Error::Torch(format!("{}: {e}", path.display()))
+/// Largest header the crate accepts (its `MAX_HEADER_SIZE`).
+const MAX_HEADER_BYTES: u64 = 100_000_000;
+
+fn invalid(path: &Path, what: impl std::fmt::Display) -> Error {
+    Error::input(path, format!("not a valid safetensors file: {what}"))
 }
 
-/// Writes named f32 tensors as safetensors with `metadata` (atomically: temporary file, then rename).
+/// The crate's error in words (its `Display` is the variant's name).
+fn describe(e: &SafeTensorError) -> String {
+    match e {
+        SafeTensorError::HeaderTooSmall => "shorter than 8 bytes".into(),
+        SafeTensorError::HeaderTooLarge => format!("header longer than {MAX_HEADER_BYTES} bytes"),
+        SafeTensorError::InvalidHeaderLength => "the header length runs past the end of the file (truncated?)".into(),
+        SafeTensorError::MetadataIncompleteBuffer => "the tensor data does not match the header (truncated?)".into(),
+        SafeTensorError::InvalidHeader | SafeTensorError::InvalidHeaderStart => "the header is not a JSON object".into(),
+        other => format!("{other:?}"),
+    }
+}
+
+/// One tensor as the crate serialises it: f32 little-endian bytes, copied out when the crate asks for them,
+/// so only the file's buffer and one tensor's bytes are in memory at a time.
+struct F32View {
+    /// A contiguous f32 tensor on the CPU.
+    tensor: Tensor,
+    shape: Vec<usize>,
+}
+
+impl F32View {
+    fn new(t: &Tensor) -> Self {
+        let tensor = t.detach().to_device(Device::Cpu).to_kind(Kind::Float).contiguous();
+        let shape = tensor.size().iter().map(|&d| d as usize).collect();
+        F32View { tensor, shape }
+    }
+}
+
+impl View for F32View {
+    fn dtype(&self) -> Dtype {
+        Dtype::F32
+    }
+    fn shape(&self) -> &[usize] {
+        &self.shape
+    }
+    fn data(&self) -> Cow<'_, [u8]> {
+        let n = self.shape.iter().product::<usize>();
+        let mut values = vec![0f32; n];
+        self.tensor.f_copy_data(&mut values, n).expect("a contiguous CPU f32 tensor copies into a buffer of its size");
+        Cow::Owned(values.iter().flat_map(|v| v.to_le_bytes()).collect())
+    }
+    fn data_len(&self) -> usize {
+        4 * self.shape.iter().product::<usize>()
+    }
+}
+
+/// Writes named tensors (as f32) as safetensors with `metadata`, through [`atomic::write_atomic`]: a temporary
+/// file in the checkpoint's folder, fsynced, renamed over `path`, the folder fsynced. A crash leaves the
+/// previous file whole; its stale temporary file is removed by the next save of the same file.
 pub fn write_safetensors(path: &Path, tensors: &[(String, Tensor)], metadata: &BTreeMap<String, String>) -> Result<()> {
-    let mut header = serde_json::Map::new();
-    if !metadata.is_empty() {
-        header.insert("__metadata__".into(), serde_json::to_value(metadata).expect("strings"));
+    let mut names: Vec<&str> = tensors.iter().map(|(n, _)| n.as_str()).collect();
+    names.sort_unstable();
+    if let Some(w) = names.windows(2).find(|w| w[0] == w[1]) {
+        return Err(Error::InvalidArgument(format!("{}: tensor `{}` given twice", path.display(), w[0])));
     }
-    let mut sorted: Vec<&(String, Tensor)> = tensors.iter().collect();
-    sorted.sort_by(|a, b| a.0.cmp(&b.0));
-    let mut data = Vec::new();
-    for (name, t) in sorted {
-        let t = t.detach().to_device(Device::Cpu).to_kind(Kind::Float).contiguous();
-        let values: Vec<f32> = Vec::try_from(t.flatten(0, -1)).map_err(|e| torch(path, e))?;
-        let start = data.len();
-        data.extend(values.iter().flat_map(|v| v.to_le_bytes()));
-        header.insert(
-            name.clone(),
-            serde_json::json!({"dtype": "F32", "shape": t.size(), "data_offsets": [start, data.len()]}),
-        );
-    }
-    let mut text = serde_json::to_string(&serde_json::Value::Object(header)).expect("json");
-    while text.len() % 8 != 0 {
-        text.push(' ');
-    }
-    let tmp = path.with_extension("safetensors.tmp");
-    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
-    }
-    let mut f = std::fs::File::create(&tmp).map_err(|e| Error::io(&tmp, e))?;
-    f.write_all(&(text.len() as u64).to_le_bytes())
-        .and_then(|_| f.write_all(text.as_bytes()))
-        .and_then(|_| f.write_all(&data))
-        .and_then(|_| f.sync_all())
-        .map_err(|e| Error::io(&tmp, e))?;
-    std::fs::rename(&tmp, path).map_err(|e| Error::io(path, e))
-}
-
-/// The header of a safetensors file: its `__metadata__` and each tensor's shape.
-pub fn read_header(path: &Path) -> Result<(BTreeMap<String, String>, BTreeMap<String, Vec<i64>>)> {
-    let bad = |m: String| Error::input(path, m);
-    let mut f = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
-    let mut n = [0u8; 8];
-    f.read_exact(&mut n).map_err(|_| bad("not a safetensors file (shorter than 8 bytes)".into()))?;
-    let n = u64::from_le_bytes(n);
-    if n > 100_000_000 {
-        return Err(bad(format!("not a safetensors file (header length {n})")));
-    }
-    let mut text = vec![0u8; n as usize];
-    f.read_exact(&mut text).map_err(|_| bad("truncated safetensors header".into()))?;
-    let header: serde_json::Map<String, serde_json::Value> =
-        serde_json::from_slice(&text).map_err(|e| bad(format!("safetensors header is not JSON: {e}")))?;
-    let mut meta = BTreeMap::new();
-    let mut shapes = BTreeMap::new();
-    for (k, v) in header {
-        if k == "__metadata__" {
-            meta = serde_json::from_value(v).map_err(|e| bad(format!("bad __metadata__: {e}")))?;
-        } else {
-            let shape = v
-                .get("shape")
-                .and_then(|s| serde_json::from_value::<Vec<i64>>(s.clone()).ok())
-                .ok_or_else(|| bad(format!("tensor `{k}` has no shape")))?;
-            shapes.insert(k, shape);
+    let views = tensors.iter().map(|(name, t)| (name.as_str(), F32View::new(t)));
+    let info = (!metadata.is_empty()).then(|| metadata.clone().into_iter().collect::<HashMap<_, _>>());
+    let bytes = safetensors::serialize(views, &info).map_err(|e| Error::Internal(format!("{}: {e}", path.display())))?;
+    let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    atomic::write_atomic(dir, path, &bytes, atomic::Publish::Replace)?;
+    let target = path.file_name().and_then(|n| n.to_str()).unwrap_or_default();
+    for (temp, name) in atomic::list_temps(dir).unwrap_or_default() {
+        if name.is_some_and(|n| n.target == target && n.is_stale()) {
+            let _ = std::fs::remove_file(temp);
         }
     }
-    Ok((meta, shapes))
+    Ok(())
+}
+
+/// Reads and checks the header of a safetensors file without reading its tensor data: the 8-byte length
+/// and the JSON header, parsed by the crate; the tensors must tile the rest of the file exactly (as the
+/// crate checks when it has the whole file), so a truncated file is caught here too.
+fn read_metadata(path: &Path) -> Result<Metadata> {
+    let mut f = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let file_len = f.metadata().map_err(|e| Error::io(path, e))?.len();
+    let mut n = [0u8; 8];
+    f.read_exact(&mut n).map_err(|_| invalid(path, describe(&SafeTensorError::HeaderTooSmall)))?;
+    let n = u64::from_le_bytes(n);
+    if n > MAX_HEADER_BYTES || 8 + n > file_len {
+        return Err(invalid(path, format!("header length {n} in a file of {file_len} bytes (truncated?)")));
+    }
+    let mut text = vec![0u8; n as usize];
+    f.read_exact(&mut text).map_err(|e| Error::io(path, e))?;
+    if text.first() != Some(&b'{') {
+        return Err(invalid(path, describe(&SafeTensorError::InvalidHeaderStart)));
+    }
+    let meta: Metadata = serde_json::from_slice(&text).map_err(|e| invalid(path, format!("header: {e}")))?;
+    let mut infos: Vec<(String, &TensorInfo)> = meta.tensors().into_iter().collect();
+    infos.sort_by_key(|(_, i)| i.data_offsets);
+    let mut end = 0usize;
+    for (name, info) in infos {
+        let bytes = info.shape.iter().try_fold(info.dtype.size(), |a, &d| a.checked_mul(d));
+        let (s, e) = info.data_offsets;
+        if s != end || e < s || bytes != Some(e - s) {
+            return Err(invalid(path, format!("tensor `{name}`: offsets {s}..{e} do not fit its shape and the other tensors")));
+        }
+        end = e;
+    }
+    if 8 + n + end as u64 != file_len {
+        return Err(invalid(path, format!("{} bytes after the header, the header declares {end} (truncated?)", file_len - 8 - n)));
+    }
+    Ok(meta)
+}
+
+/// The header of a safetensors file: its `__metadata__` and each tensor's shape (the data is not read).
+pub fn read_header(path: &Path) -> Result<(BTreeMap<String, String>, BTreeMap<String, Vec<i64>>)> {
+    let meta = read_metadata(path)?;
+    let shapes = meta.tensors().into_iter().map(|(k, i)| (k, i.shape.iter().map(|&d| d as i64).collect())).collect();
+    Ok((meta.metadata().clone().unwrap_or_default().into_iter().collect(), shapes))
+}
+
+/// Every tensor of a safetensors file, in the file's dtype, read through the crate.
+pub fn read_tensors(path: &Path) -> Result<Vec<(String, Tensor)>> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let file = SafeTensors::deserialize(&bytes).map_err(|e| invalid(path, describe(&e)))?;
+    file.tensors()
+        .into_iter()
+        .map(|(name, view)| {
+            let t = Tensor::try_from(view).map_err(|e| Error::input(path, format!("tensor `{name}`: {e}")))?;
+            Ok((name, t))
+        })
+        .collect()
 }
 
 /// Saves the network's variables with `meta` in the header.
@@ -193,8 +260,7 @@ pub fn infer_official_config(path: &Path, shapes: &BTreeMap<String, Vec<i64>>) -
 /// Copies the tensors of `path` into `vs`; every variable must be present with its shape and the file
 /// may hold no other tensor.
 pub fn load_weights(path: &Path, vs: &mut nn::VarStore) -> Result<()> {
-    let file: HashMap<String, Tensor> =
-        Tensor::read_safetensors(path).map_err(|e| torch(path, e))?.into_iter().collect();
+    let file: HashMap<String, Tensor> = read_tensors(path)?.into_iter().collect();
     let mut vars = vs.variables();
     let mut extra: Vec<&String> = file.keys().filter(|k| !vars.contains_key(*k)).collect();
     extra.sort();
@@ -229,27 +295,4 @@ pub fn load_correction(path: &Path, device: Device) -> Result<(nn::VarStore, Cor
         vs.set_device(device);
     }
     Ok((vs, net, meta))
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn header_round_trip_and_corrupt_files_name_the_problem() {
-        let dir = tempfile::tempdir().unwrap();
-        let p = dir.path().join("t.safetensors");
-        let t = Tensor::from_slice(&[1.5f32, -2.0, 3.25, 0.0, 7.0, 8.0]).view([2, 3]);
-        write_safetensors(&p, &[("a.b".into(), t.shallow_clone())], &BTreeMap::from([("k".into(), "v".into())]))
-            .unwrap();
-        let (meta, shapes) = read_header(&p).unwrap();
-        assert_eq!(meta.get("k").map(String::as_str), Some("v"));
-        assert_eq!(shapes.get("a.b"), Some(&vec![2, 3]));
-        // tch's own reader accepts the file.
-        let back = Tensor::read_safetensors(&p).unwrap();
-        assert_eq!(back[0].0, "a.b");
-        assert!(back[0].1.equal(&t));
-        std::fs::write(&p, b"abc").unwrap();
-        assert!(read_meta(&p).unwrap_err().to_string().contains("not a safetensors file"));
-    }
 }
