@@ -1,6 +1,7 @@
 //! pointreggpt: realistic training pairs for point-cloud registration from single depth maps
 //! (PointRegGPT, ECCV 2024).
 
+pub mod atomic;
 pub mod cli;
 pub mod commands;
 pub mod correction;

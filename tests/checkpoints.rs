@@ -12,7 +12,7 @@ mod support;
 use pointreggpt::diffusion::checkpoint::{group, load_denoiser};
 use pointreggpt::nn::checkpoint::{read_header, read_meta, read_tensors, write_safetensors};
 use pointreggpt::nn::{load_correction, Preset, UnetConfig};
-use pointreggpt::shards::atomic::TempName;
+use pointreggpt::atomic::TempName;
 use safetensors::tensor::{Dtype, SafeTensors};
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::path::{Path, PathBuf};

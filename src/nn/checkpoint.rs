@@ -8,8 +8,8 @@
 use super::correction::{CorrectionNet, CorrectionNetConfig};
 use super::unet::{Preset, UnetConfig};
 use crate::error::{Error, Result};
-// The atomic-write helper the shards use (imported here only).
-use crate::shards::atomic;
+// The atomic-write helper the shards' commit protocol uses.
+use crate::atomic;
 use safetensors::tensor::{Dtype, Metadata, SafeTensorError, SafeTensors, TensorInfo, View};
 use serde::{Deserialize, Serialize};
 use std::borrow::Cow;

@@ -1,7 +1,7 @@
 //! Committing a shard ([`Dataset::commit_shard`]): Parquet to a temporary file, fsync, publish without
 //! replacing, then its manifest entry the same way; and withdrawing one ([`Dataset::retract`]).
 
-use super::atomic::{write_atomic, Publish, Published};
+use crate::atomic::{write_atomic, Publish, Published};
 use super::dataset::{Dataset, MANIFEST_DIR, PAIRS_TABLE, SHARDS_DIR};
 use super::manifest::{check_table_name, shard_stem, utc_now, ManifestEntry};
 use super::pairs::pairs_to_batch;
@@ -112,7 +112,7 @@ impl Dataset {
         check_table_name(table)?;
         let path = self.manifest_path(table, shard);
         match fs::remove_file(&path) {
-            Ok(()) => super::atomic::sync_dir(&self.root.join(MANIFEST_DIR)),
+            Ok(()) => crate::atomic::sync_dir(&self.root.join(MANIFEST_DIR)),
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
             Err(e) => Err(Error::io(&path, e)),
         }
@@ -122,7 +122,7 @@ impl Dataset {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::shards::atomic::list_temps;
+    use crate::atomic::list_temps;
     use crate::shards::dataset::tests::{rows, CONFIG};
     use crate::shards::dataset::TMP_DIR;
     use crate::shards::read::list_files;

@@ -4,11 +4,11 @@
 //!
 //! See the module docs of [`crate::shards`] for the layout and the commit protocol.
 
-use super::atomic::{hostname, list_temps, write_atomic, Publish, Published};
-use super::config_diff::config_mismatch;
+use super::config_diff::config_differences;
 use super::manifest::{shard_stem, utc_now};
 use super::schema::SCHEMA_VERSION;
 use super::CODE_VERSION;
+use crate::atomic::{hostname, list_temps, write_atomic, Publish, Published};
 use crate::error::{Error, Result};
 use std::fs;
 use std::path::{Path, PathBuf};
@@ -208,10 +208,49 @@ fn check_schema_version(root: &Path, header: &DatasetHeader) -> Result<()> {
     ))
 }
 
+/// How many differing keys a config-mismatch message lists.
+const MAX_LISTED_DIFFERENCES: usize = 10;
+
+/// The refusal for a config whose hash differs from the dataset's, listing the differing keys.
+fn config_mismatch(
+    root: &Path,
+    header: &DatasetHeader,
+    recorded: &toml::Table,
+    config: &toml::Table,
+    config_hash: &str,
+) -> Error {
+    let short = |h: &str| h.chars().take(12).collect::<String>();
+    let diffs = config_differences(recorded, config);
+    let mut msg = format!(
+        "the dataset {} was built with another pipeline config (its config_hash {}…, this run's {}…).",
+        root.display(),
+        short(&header.config_hash),
+        short(config_hash)
+    );
+    if diffs.is_empty() {
+        msg.push_str(" The keys and values are equal; only the hashes differ (computed by another code version?).");
+    } else {
+        msg.push_str(" Differing keys (dataset → this run):");
+        for d in diffs.iter().take(MAX_LISTED_DIFFERENCES) {
+            msg.push_str("\n  ");
+            msg.push_str(d);
+        }
+        if diffs.len() > MAX_LISTED_DIFFERENCES {
+            msg.push_str(&format!("\n  … and {} more", diffs.len() - MAX_LISTED_DIFFERENCES));
+        }
+    }
+    msg.push_str(&format!(
+        "\nA dataset holds the output of one config: write this run to a new output folder, or rerun with the \
+         config recorded in {} to resume the dataset.",
+        root.join(DATASET_FILE).display()
+    ));
+    Error::config("config", msg)
+}
+
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
-    use crate::shards::atomic::TempName;
+    use crate::atomic::TempName;
     use crate::shards::pairs::tests::sample_row;
     use crate::shards::row::PairRow;
 
@@ -305,5 +344,20 @@ pub(crate) mod tests {
         let removed = ds.clean_stale_temps().unwrap();
         assert_eq!(removed, [ds.tmp_dir().join(dead.file_name())]);
         assert_eq!(list_temps(&ds.tmp_dir()).unwrap().len(), 3);
+    }
+
+    #[test]
+    fn long_differences_are_cut_at_ten() {
+        let old: toml::Table = (0..15).map(|i| format!("k{i:02} = {i}\n")).collect::<String>().parse().unwrap();
+        let new = toml::Table::new();
+        assert_eq!(config_differences(&old, &new).len(), 15);
+        let header = DatasetHeader {
+            config_hash: "a".into(),
+            schema_version: SCHEMA_VERSION.into(),
+            code_version: CODE_VERSION.into(),
+            created: utc_now(),
+        };
+        let msg = config_mismatch(Path::new("/d"), &header, &old, &new, "b").to_string();
+        assert!(msg.contains("k09: 9 → (absent)") && !msg.contains("k10:") && msg.contains("and 5 more"), "{msg}");
     }
 }

@@ -33,7 +33,6 @@
 //! on first use; a run whose config hash differs from the recorded one is refused, naming the differing
 //! config keys ([`Dataset::create_or_open`]).
 
-pub mod atomic;
 pub mod commit;
 pub mod config_diff;
 pub mod dataset;

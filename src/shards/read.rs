@@ -130,7 +130,7 @@ pub(crate) fn list_files(dir: &Path) -> Result<Vec<(PathBuf, String)>> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::shards::atomic::TempName;
+    use crate::atomic::TempName;
     use crate::shards::dataset::tests::{rows, CONFIG};
     use crate::shards::pairs::pairs_to_batch;
     use crate::shards::parquet_io::write_parquet_bytes;

@@ -1,6 +1,6 @@
 //! `verify`: proves every committed shard is the file its manifest entry describes, and lists leftovers.
 
-use super::atomic::list_temps;
+use crate::atomic::list_temps;
 use super::dataset::{Dataset, PAIRS_TABLE, SHARDS_DIR};
 use super::read::list_files;
 use super::manifest::{parse_shard_file_name, ManifestEntry};
@@ -247,7 +247,7 @@ mod tests {
         let ds = dataset(dir.path());
         fs::remove_file(ds.manifest_path(PAIRS_TABLE, 2)).unwrap();
         fs::write(ds.manifest_path(PAIRS_TABLE, 1), "not json").unwrap();
-        let dead = crate::shards::atomic::TempName { pid: 4_194_304 + 5, ..crate::shards::atomic::TempName::new("x") };
+        let dead = crate::atomic::TempName { pid: 4_194_304 + 5, ..crate::atomic::TempName::new("x") };
         fs::write(ds.tmp_dir().join(dead.file_name()), b"").unwrap();
         fs::write(ds.tmp_dir().join("unknown"), b"").unwrap();
         let report = ds.verify().unwrap();

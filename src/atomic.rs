@@ -1,6 +1,8 @@
 //! Atomic file publication: write a temporary file, fsync it, rename (or link) it into place, fsync the folder.
+//! The shards' commit protocol and the checkpoints both write through it, so a crash never leaves a torn file.
 //!
-//! Temporary files live in one folder (the dataset's `.tmp/`, on the same file system as the targets) and
+//! Temporary files live in one folder (a dataset's `.tmp/`, a checkpoint's own folder: on the same file
+//! system as the targets) and
 //! are named `<host>~<pid>~<target>~<nonce>.tmp`, so that [`TempName::parse`] can tell which process on
 //! which host made them and whether that process still runs.
 
