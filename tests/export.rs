@@ -348,40 +348,9 @@ fn pair_dataset_py_reads_only_the_committed_shards() {
     assert_eq!(v["files"], 2);
 }
 
-/// An `ok` row with empty clouds and identity pose, for the writer tests below.
+/// An `ok` row of pair `s/frame-000000#0` with empty clouds, the identity pose and fx = fy = cx = cy = 2.
 fn empty_row() -> PairRow {
-    let mut t = [0.0; 16];
-    [0, 5, 10, 15].iter().for_each(|&i| t[i] = 1.0);
-    PairRow {
-        unit_index: 0,
-        pair_key: "s/frame-000000#0".into(),
-        scene: "s".into(),
-        frame_key: "s/frame-000000".into(),
-        sample_index: 0,
-        source_path: String::new(),
-        source_hash: String::new(),
-        status: Status::Ok,
-        message: String::new(),
-        seed: 0,
-        width: 4,
-        height: 4,
-        source_intrinsics: [2.0, 2.0, 2.0, 2.0],
-        target_intrinsics: [2.0, 2.0, 2.0, 2.0],
-        t_target_from_source: t,
-        pose_draws: 1,
-        source_points: Vec::new(),
-        target_points: Vec::new(),
-        overlap_source: 0.0,
-        overlap_target: 0.0,
-        source_depth_png: Vec::new(),
-        condition_depth_png: Vec::new(),
-        target_depth_png: Vec::new(),
-        known_mask_png: Vec::new(),
-        config_hash: String::new(),
-        code_version: String::new(),
-        stages: String::new(),
-        timings: Vec::new(),
-    }
+    PairRow { pair_key: "s/frame-000000#0".into(), source_intrinsics: [2.0; 4], target_intrinsics: [2.0; 4], ..PairRow::default() }
 }
 
 #[test]

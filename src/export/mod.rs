@@ -138,41 +138,20 @@ pub fn row_pose(row: &PairRow) -> Result<nalgebra::Isometry3<f64>> {
 
 #[cfg(test)]
 pub(crate) mod tests_support {
-    use crate::shards::row::{PairRow, Status};
+    use crate::shards::row::PairRow;
 
-    /// An `ok` row with empty clouds and identity pose, for unit tests.
+    /// An `ok` 4×4 row of frame `s/frame-000000` with empty clouds and the identity pose, for unit tests.
     pub fn empty_row() -> PairRow {
-        let mut t = [0.0; 16];
-        [0, 5, 10, 15].iter().for_each(|&i| t[i] = 1.0);
         PairRow {
-            unit_index: 0,
             pair_key: "s/frame-000000#0".into(),
             scene: "s".into(),
             frame_key: "s/frame-000000".into(),
-            sample_index: 0,
-            source_path: String::new(),
-            source_hash: String::new(),
-            status: Status::Ok,
-            message: String::new(),
-            seed: 0,
             width: 4,
             height: 4,
-            source_intrinsics: [2.0, 2.0, 2.0, 2.0],
-            target_intrinsics: [2.0, 2.0, 2.0, 2.0],
-            t_target_from_source: t,
+            source_intrinsics: [2.0; 4],
+            target_intrinsics: [2.0; 4],
             pose_draws: 1,
-            source_points: Vec::new(),
-            target_points: Vec::new(),
-            overlap_source: 0.0,
-            overlap_target: 0.0,
-            source_depth_png: Vec::new(),
-            condition_depth_png: Vec::new(),
-            target_depth_png: Vec::new(),
-            known_mask_png: Vec::new(),
-            config_hash: String::new(),
-            code_version: String::new(),
-            stages: String::new(),
-            timings: Vec::new(),
+            ..PairRow::default()
         }
     }
 }

@@ -97,6 +97,45 @@ pub struct PairRow {
     pub timings: Vec<StageTiming>,
 }
 
+impl Default for PairRow {
+    /// An `ok` row of unit 0 with empty text, clouds and PNGs, zero intrinsics and the identity pose: a
+    /// starting point for code that fills in what it needs (tests, hand-made rows).
+    fn default() -> Self {
+        let mut identity = [0.0; 16];
+        [0, 5, 10, 15].iter().for_each(|&i| identity[i] = 1.0);
+        PairRow {
+            unit_index: 0,
+            pair_key: String::new(),
+            scene: String::new(),
+            frame_key: String::new(),
+            sample_index: 0,
+            source_path: String::new(),
+            source_hash: String::new(),
+            status: Status::Ok,
+            message: String::new(),
+            seed: 0,
+            width: 0,
+            height: 0,
+            source_intrinsics: [0.0; 4],
+            target_intrinsics: [0.0; 4],
+            t_target_from_source: identity,
+            pose_draws: 0,
+            source_points: Vec::new(),
+            target_points: Vec::new(),
+            overlap_source: 0.0,
+            overlap_target: 0.0,
+            source_depth_png: Vec::new(),
+            condition_depth_png: Vec::new(),
+            target_depth_png: Vec::new(),
+            known_mask_png: Vec::new(),
+            config_hash: String::new(),
+            code_version: String::new(),
+            stages: String::new(),
+            timings: Vec::new(),
+        }
+    }
+}
+
 impl PairRow {
     /// blake3 over every deterministic column (everything but `timings`): equal digests mean equal
     /// pairs, whatever the thread count, shard size or interruption.
