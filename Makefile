@@ -30,7 +30,7 @@ demo: libtorch
 	$(CARGO) run --release -- preview out/demo --out out/demo-preview --limit 4 --no-progress
 	$(CARGO) run --release -- stats out/demo --out out/demo-stats --no-progress
 
-# Python peers the tests read shards with (pyarrow, DuckDB), from PyPI, once.
+# Python peers the tests compare against (pyarrow, DuckDB; PyTorch for the checkpoint conversion), from PyPI, once.
 test-deps:
 	./scripts/install-test-deps.sh
 
