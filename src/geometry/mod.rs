@@ -9,6 +9,7 @@ pub mod depth;
 pub mod depth_filters;
 pub mod intrinsics;
 pub mod overlap;
+pub mod overlap_estimate;
 pub mod pose;
 pub mod pose_sampling;
 pub mod projection;
@@ -19,9 +20,10 @@ pub use depth::{backproject, backproject_with_pixels, DepthMap, DepthRange};
 pub use depth_filters::valid_min3x3;
 pub use intrinsics::{Intrinsics, ResizeCrop};
 pub use overlap::{overlap, Overlap, RadiusIndex};
+pub use overlap_estimate::view_overlap;
 pub use pose::{pose_from_rows, pose_to_rows, relative_pose, transform_points};
 pub use pose_sampling::PivotPoseSampler;
-pub use projection::{coverage, project_zbuffer, Projection};
+pub use projection::{project_zbuffer, Projection};
 pub use voxel::voxel_downsample;
 
 /// A 3D point in metres.

@@ -32,6 +32,18 @@ impl Default for PivotPoseSampler {
 }
 
 impl PivotPoseSampler {
+    /// The sampler with its motion scaled by `s`: both angle bounds (capped at 90°) and the lateral
+    /// standard deviation times `s`, the pivot unchanged.
+    pub fn scaled(&self, s: f64) -> PivotPoseSampler {
+        let cap = std::f64::consts::FRAC_PI_2;
+        PivotPoseSampler {
+            max_pitch: (self.max_pitch * s).min(cap),
+            max_yaw: (self.max_yaw * s).min(cap),
+            pivot_distance: self.pivot_distance,
+            lateral_sigma: self.lateral_sigma * s,
+        }
+    }
+
     /// Draws `T_target_from_source`; uses exactly four draws of `rng` (θ, φ, n_x, n_y).
     pub fn sample(&self, rng: &mut Rng) -> Isometry3<f64> {
         let theta = rng.uniform_range(-self.max_pitch, self.max_pitch);

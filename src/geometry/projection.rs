@@ -1,6 +1,6 @@
 //! Z-buffer projection of a point cloud into a camera: the nearest point wins each pixel.
 
-use super::{AxisBox, DepthMap, DepthRange, Intrinsics, Point, F64_TO_INT_MAGIC};
+use super::{DepthMap, Intrinsics, Point, F64_TO_INT_MAGIC};
 use nalgebra::Isometry3;
 use rayon::prelude::*;
 
@@ -191,36 +191,10 @@ impl Lander {
     }
 }
 
-/// Cheap overlap estimate for pose sampling: the share of every `stride`-th point of `points` (source
-/// frame) that lands in camera `k` under `t_target_from_source` ([`project_zbuffer`]'s projection) with
-/// its depth inside `range` and its camera-frame position inside `crop_box`. 0 for no points.
-pub fn coverage(
-    points: &[Point],
-    t_target_from_source: &Isometry3<f64>,
-    k: &Intrinsics,
-    range: DepthRange,
-    crop_box: &AxisBox,
-    stride: usize,
-) -> f64 {
-    let lander = Lander::new(t_target_from_source, k);
-    let (mut seen, mut total) = (0usize, 0usize);
-    for p in points.iter().step_by(stride.max(1)) {
-        total += 1;
-        let (x, y, z, _, lands) = lander.project(p);
-        let q = Point::new(x as f32, y as f32, z as f32);
-        seen += (lands && range.contains(q.z) && crop_box.contains(&q)) as usize;
-    }
-    if total == 0 {
-        0.0
-    } else {
-        seen as f64 / total as f64
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::backproject;
+    use crate::geometry::{backproject, DepthRange};
 
     #[test]
     fn nearest_point_wins_and_ties_go_to_lowest_index() {
@@ -307,30 +281,5 @@ mod tests {
         for (kn, z) in p.known.iter().zip(d.data()) {
             assert_eq!(*kn, *z > 0.0);
         }
-    }
-
-    #[test]
-    fn coverage_counts_the_points_that_land_inside_image_range_and_box() {
-        // A 3x1 camera looking down z: a point ahead, one outside the image, one beyond the range, one
-        // outside the box, one behind the camera; every second point with stride 2.
-        let k = Intrinsics::new(1.0, 1.0, 1.0, 0.0, 3, 1).unwrap();
-        let range = DepthRange { near: 0.5, far: 5.0 };
-        let crop = AxisBox { min: [-1.0, -1.0, 0.5], max: [1.0, 1.0, 3.0] };
-        let pts = vec![
-            Point::new(0.0, 0.0, 2.0),  // lands, inside everything
-            Point::new(9.0, 0.0, 2.0),  // outside the image
-            Point::new(0.0, 0.0, 6.0),  // beyond the range
-            Point::new(0.0, 0.0, 4.0),  // inside range, outside the box
-            Point::new(0.0, 0.0, -2.0), // behind the camera
-            Point::new(0.5, 0.0, 1.0),  // lands (column 1.5 -> 2), inside
-        ];
-        let id = Isometry3::identity();
-        assert_eq!(coverage(&pts, &id, &k, range, &crop, 1), 2.0 / 6.0);
-        assert_eq!(coverage(&pts, &id, &k, range, &crop, 2), 1.0 / 3.0, "points 0, 2, 4");
-        assert_eq!(coverage(&[], &id, &k, range, &crop, 1), 0.0);
-        // The camera 1 m back: the first point moves to 3 m, on the box's far face (inside); the fourth to 5 m.
-        let back = Isometry3::translation(0.0, 0.0, 1.0);
-        assert_eq!(coverage(&pts[..1], &back, &k, range, &crop, 1), 1.0);
-        assert_eq!(coverage(&pts[3..4], &back, &k, range, &crop, 1), 0.0);
     }
 }

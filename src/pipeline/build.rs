@@ -110,7 +110,9 @@ fn build_stages(config: &BuildConfig, catalog: Arc<Catalog>, strict: bool, threa
     .into_iter();
     let mut stages = vec![
         StageSpec::replicated(n, || Ingest { catalog: catalog.clone(), working: w.clone(), strict }),
-        StageSpec::replicated(n, || config.pose.build(w.depth_range(), w.crop_box)),
+        StageSpec::replicated(n, || {
+            config.pose.build(&config.correct.condition, w.depth_range(), w.crop_box, config.voxelize.voxel, config.validate.radius)
+        }),
         StageSpec::replicated(n, || Reproject),
         StageSpec::replicated(n, || config.correct.build(Target::Condition)),
         StageSpec::replicated(n, || Inpaint { inpainter: inpainters.next().expect("one inpainter per worker") }),

@@ -38,13 +38,7 @@ pub fn round_trip(depth: &DepthMap, k: &Intrinsics, t_moved_from_camera: &Isomet
 /// uniform draw in [`MOTION_SCALE`], from consecutive-frame motion up to the build's full motion.
 pub fn sample_motion(sampler: &PivotPoseSampler, rng: &mut Rng) -> Isometry3<f64> {
     let s = rng.uniform_range(MOTION_SCALE.0, MOTION_SCALE.1);
-    PivotPoseSampler {
-        max_pitch: sampler.max_pitch * s,
-        max_yaw: sampler.max_yaw * s,
-        lateral_sigma: sampler.lateral_sigma * s,
-        ..*sampler
-    }
-    .sample(rng)
+    sampler.scaled(s).sample(rng)
 }
 
 /// Range of the motion scale of [`sample_motion`].
