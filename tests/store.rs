@@ -6,7 +6,7 @@
 mod support;
 
 use pointreggpt::shards::dataset::Dataset;
-use pointreggpt::shards::store::{open_store, DatasetStore};
+use pointreggpt::shards::store::open_store;
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::process::{Command, Output, Stdio};
@@ -126,12 +126,12 @@ fn sigkills_during_an_s3_build_then_resume_give_the_same_dataset_and_repair_leav
     moto.create_bucket("kills");
     let dir = tempfile::tempdir().unwrap();
     let config = dir.path().join("c.toml");
-    std::fs::write(&config, synthetic_config(2, 24, 2, 1, 320, 240, 2)).unwrap();
+    std::fs::write(&config, synthetic_config(2, 40, 2, 1, 320, 240, 2)).unwrap();
     let local = dir.path().join("ref");
     ok(build(&moto.endpoint(), &config, local.to_str().unwrap()).output().unwrap());
     let reference = digests(local.to_str().unwrap());
     let url = "s3://kills/ds";
-    let (total, mut log) = (12, Vec::new());
+    let (total, mut log) = (20, Vec::new());
     let mut rng = pointreggpt::rng::Rng::new(18);
     for i in 0..8 {
         let mut child = build(&moto.endpoint(), &config, url).spawn().unwrap();
@@ -224,22 +224,25 @@ fn bad_urls_fail_clearly_before_any_work() {
     fails(&moto.endpoint(), &[], "s3://missing-bucket/ds", &["s3://missing-bucket/ds", "does the bucket exist"]);
     let closed = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
     fails(&format!("http://127.0.0.1:{closed}"), &[], "s3://present/ds", &["s3://present/ds", "cannot reach the store"]);
-    // Wrong credentials: moto checks signatures once authentication is on; a key made by IAM works.
-    let key = peer(&moto.endpoint(), &["iam-key", &moto.endpoint()]);
-    let (id, secret) = key.split_once(' ').unwrap();
-    moto.require_auth();
-    fails(&moto.endpoint(), &[("AWS_ACCESS_KEY_ID", id), ("AWS_SECRET_ACCESS_KEY", "wrong")], "s3://present/ds", &["s3://present/ds", "credentials were refused"]);
-    // The right key from a profile file (no key in the environment) is accepted.
-    let creds = dir.path().join("credentials");
-    std::fs::write(&creds, format!("[builder]\naws_access_key_id = {id}\naws_secret_access_key = {secret}\n")).unwrap();
-    let o = build(&moto.endpoint(), &config, "s3://present/ds")
+    // A profile in the AWS files (no key, no endpoint in the environment): its endpoint_url can only come
+    // from the config file, so the build reaching moto shows the files were read.
+    let (creds, conf) = (dir.path().join("credentials"), dir.path().join("config"));
+    std::fs::write(&creds, "[builder]\naws_access_key_id = testing\naws_secret_access_key = testing\n").unwrap();
+    std::fs::write(&conf, format!("[profile builder]\nregion = us-east-1\nendpoint_url = {}\n", moto.endpoint())).unwrap();
+    let o = build(&moto.endpoint(), &config, "s3://present/profile")
         .env_remove("AWS_ACCESS_KEY_ID")
         .env_remove("AWS_SECRET_ACCESS_KEY")
+        .env_remove("AWS_ENDPOINT_URL")
+        .env_remove("AWS_REGION")
         .env("AWS_SHARED_CREDENTIALS_FILE", &creds)
+        .env("AWS_CONFIG_FILE", &conf)
         .env("AWS_PROFILE", "builder")
         .output()
         .unwrap();
-    assert!(ok(o).contains("2 committed now"));
+    assert!(ok(o).contains("1 committed now"));
+    // Wrong credentials: with moto's authentication on, a key IAM never made is refused.
+    moto.require_auth();
+    fails(&moto.endpoint(), &[("AWS_ACCESS_KEY_ID", "AKIAIOSFODNN7EXAMPLE")], "s3://present/ds", &["s3://present/ds", "InvalidAccessKeyId", "credentials were refused"]);
 }
 
 #[test]

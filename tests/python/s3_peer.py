@@ -5,7 +5,6 @@
   uploads ENDPOINT BUCKET          incomplete multipart uploads (boto3)
   objects ENDPOINT BUCKET PREFIX   every key under PREFIX with its size and ETag (boto3)
   abandon ENDPOINT BUCKET PREFIX RECORD OBJECT   a writer that died mid multipart upload: one part sent, record written
-  iam-key ENDPOINT                 an IAM user allowed everything; prints its access key id and secret
 
 Rows are printed as JSON: {pair_key: [status, overlap_source, n_source_points, n_target_points, unit_index]}.
 The endpoint's credentials are taken from the environment (AWS_ACCESS_KEY_ID, ...).
@@ -93,14 +92,6 @@ def main():
         body = json.dumps({"object": obj, "upload_id": upload}).encode()
         s3.put_object(Bucket=bucket, Key=f"{prefix}/.tmp/{record}", Body=body)
         print(upload)
-    elif cmd == "iam-key":
-        (endpoint,) = args
-        iam = boto(endpoint, "iam")
-        iam.create_user(UserName="builder")
-        policy = {"Version": "2012-10-17", "Statement": [{"Effect": "Allow", "Action": "*", "Resource": "*"}]}
-        iam.put_user_policy(UserName="builder", PolicyName="all", PolicyDocument=json.dumps(policy))
-        key = iam.create_access_key(UserName="builder")["AccessKey"]
-        print(key["AccessKeyId"], key["SecretAccessKey"])
     else:
         sys.exit(f"unknown command {cmd}")
 

@@ -103,9 +103,11 @@ impl ObjectDatasetStore {
         Ok(self.runtime.block_on(f))
     }
 
-    /// The object key of `rel`.
+    /// The object key of `rel`, verbatim (upload records have `~` in their names, which
+    /// `object_store`'s path builder would percent-encode).
     pub(super) fn key(&self, rel: &str) -> StorePath {
-        rel.split('/').fold(self.prefix.clone(), |p, part| p.join(part))
+        let full = if self.prefix.as_ref().is_empty() { rel.to_string() } else { format!("{}/{rel}", self.prefix) };
+        StorePath::parse(&full).unwrap_or_else(|_| rel.split('/').fold(self.prefix.clone(), |p, part| p.join(part)))
     }
 
     /// An error of the store on `rel`, with a hint for the common causes.
