@@ -86,7 +86,7 @@ fn a_build_on_s3_equals_the_build_in_a_folder_and_queries_and_pyarrow_agree() {
     assert!(local.join("shards/pairs-000000.parquet").is_file());
 
     for sql in [
-        "select status, count(*) n, sum(overlap_source) s from pairs group by status order by status",
+        "select status, count(*) n, round(sum(overlap_source), 9) s, max(overlap_target) m from pairs group by status order by status",
         "select pair_key, array_length(source_points) n from pairs where status = 'ok' order by pair_key",
         "select shard, rows, units from manifest order by shard",
     ] {
