@@ -333,3 +333,34 @@ fn large_shards_go_up_in_parts_and_abandoned_uploads_are_aborted_by_repair() {
     assert_clean(&moto.endpoint(), "big", "ds");
     assert_eq!(ds.read_pairs().unwrap().len(), 40);
 }
+
+#[test]
+fn labels_on_s3_equal_labels_in_a_folder_and_training_reads_them() {
+    use pointreggpt::training::correction::data::LabelSet;
+    let _env = ENV.lock().unwrap_or_else(|e| e.into_inner());
+    let moto = Moto::start();
+    moto.set_env();
+    moto.create_bucket("labels");
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("l.toml");
+    std::fs::write(
+        &config,
+        "seed = 2\nsamples_per_window = 2\nshard_size = 1\n[source]\nkind = \"synthetic\"\nscenes = 1\n\
+         [source.synthetic]\nframes = 24\n[source.synthetic.intrinsics]\nfx = 146.25\nfy = 146.25\ncx = 80.0\ncy = 60.0\nwidth = 160\nheight = 120\n\
+         [window]\nframes = 8\nstride = 8\n[tsdf]\nvoxel_size_m = 0.02\ntruncation_m = 0.08\n",
+    )
+    .unwrap();
+    let local = dir.path().join("labels");
+    let labels = |out: &str| run(&moto.endpoint(), &["labels", config.to_str().unwrap(), "--out", out, "--no-progress"]).output().unwrap();
+    ok(labels(local.to_str().unwrap()));
+    ok(labels("s3://labels/l"));
+    // The training reader (`train correction --labels`) on both.
+    let (a, b) = (LabelSet::open(&local).unwrap(), LabelSet::open(Path::new("s3://labels/l")).unwrap());
+    assert!(!a.examples.is_empty());
+    assert_eq!(a.examples.len(), b.examples.len());
+    for (x, y) in a.examples.iter().zip(&b.examples) {
+        assert_eq!((&x.key, &x.sparse, &x.dense, &x.keep), (&y.key, &y.sparse, &y.dense, &y.keep));
+    }
+    let v = ok(run(&moto.endpoint(), &["verify", "s3://labels/l"]).output().unwrap());
+    assert!(v.contains("labels: 3 shards intact"), "{v}");
+}
