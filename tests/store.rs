@@ -80,6 +80,10 @@ fn a_build_on_s3_equals_the_build_in_a_folder_and_queries_and_pyarrow_agree() {
     let reference = digests(local.to_str().unwrap());
     assert_eq!(reference.len(), 12);
     assert_eq!(digests(url), reference, "same rows, content hash for content hash");
+    // Another config on the same prefix is refused, naming the URL and the key.
+    let o = build(&moto.endpoint(), &config, url).args(["--set", "seed=12"]).output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("s3://data/runs/demo") && err.contains("seed: 11 → 12"), "{err}");
     // Shard objects have unique names; the local layout is unchanged.
     let keys = objects(&moto.endpoint(), "data", "runs/demo");
     assert!(keys.keys().any(|k| k.starts_with("shards/pairs-000000-")), "{keys:?}");
@@ -186,6 +190,15 @@ fn two_writers_racing_on_the_same_shards_leave_one_object_per_shard() {
     assert!(lost > 0, "no writer lost a race");
     assert_eq!(digests(url), digests(local.to_str().unwrap()));
     assert_clean(&moto.endpoint(), "race", "ds");
+
+    // Two workers splitting the shards (k mod 2) into one prefix, at the same time.
+    let workers: Vec<_> = (0..2)
+        .map(|i| build(&moto.endpoint(), &config, "s3://race/split").args(["--worker", &i.to_string(), "--workers", "2"]).spawn().unwrap())
+        .collect();
+    for w in workers {
+        assert!(ok(w.wait_with_output().unwrap()).contains("2 committed now"));
+    }
+    assert_eq!(digests("s3://race/split"), digests(local.to_str().unwrap()));
 
     // Eight threads committing one shard at once: one object, one entry, the same for everyone.
     let ds = Dataset::create_or_open("s3://race/threads", "seed = 1\n", "h1").unwrap();

@@ -121,7 +121,7 @@ impl ObjectDatasetStore {
         let dir = self.key(rel);
         let metas: Vec<object_store::ObjectMeta> =
             self.run(self.store.list(Some(&dir)).try_collect())?.map_err(|e| self.err(rel, e))?;
-        let now = chrono_now_secs();
+        let now = now_secs();
         let mut out: Vec<(String, u64, Duration)> = metas
             .into_iter()
             .filter_map(|m| {
@@ -179,7 +179,7 @@ fn retry_config() -> RetryConfig {
 }
 
 /// Seconds since the Unix epoch.
-fn chrono_now_secs() -> u64 {
+fn now_secs() -> u64 {
     std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_secs()).unwrap_or(0)
 }
 
@@ -297,7 +297,7 @@ impl DatasetStore for ObjectDatasetStore {
     }
 
     fn query_target(&self, rel: &str) -> Result<QueryTarget> {
-        let url = format!("{}{}", self.base.as_str().trim_end_matches('/'), format!("/{}", self.key(rel)));
+        let url = format!("{}/{}", self.base.as_str().trim_end_matches('/'), self.key(rel));
         Ok(QueryTarget { url, store: Some((self.base.clone(), self.store.clone())) })
     }
 }

@@ -37,8 +37,6 @@ pub struct UploadRecord {
 pub struct Uploaded {
     pub bytes: u64,
     pub blake3: blake3::Hash,
-    /// Parts of the multipart upload (0: one put).
-    pub parts: usize,
 }
 
 /// An [`AsyncFileWriter`] to one object: hashes, buffers, and uploads in one put or in parts.
@@ -121,9 +119,9 @@ impl ShardUpload {
         }
     }
 
-    /// The size and hash of the bytes written, and the number of parts.
+    /// The size and hash of the bytes written.
     pub fn uploaded(&self) -> Uploaded {
-        Uploaded { bytes: self.size, blake3: self.hasher.finalize(), parts: self.upload.as_ref().map_or(0, |(_, p)| p.len()) }
+        Uploaded { bytes: self.size, blake3: self.hasher.finalize() }
     }
 }
 
