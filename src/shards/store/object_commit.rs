@@ -66,9 +66,14 @@ impl ObjectDatasetStore {
                 self.locate(&format!("{MANIFEST_DIR}/{stem}.json")).display(),
                 committed.worker
             );
-            self.delete(&object_rel)?;
+            if let Err(e) = self.delete(&object_rel) {
+                tracing::warn!("{e}; `pointreggpt verify --repair` removes the uncommitted object");
+            }
         }
-        self.delete(&record_rel)?;
+        // The shard is committed: a record that cannot be removed now is removed as stale later.
+        if let Err(e) = self.delete(&record_rel) {
+            tracing::warn!("{e}; `pointreggpt verify --repair` removes the upload record");
+        }
         Ok(committed)
     }
 
