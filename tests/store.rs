@@ -116,9 +116,10 @@ fn a_build_on_s3_equals_the_build_in_a_folder_and_queries_and_pyarrow_agree() {
     assert_clean(&moto.endpoint(), "data", "runs/demo");
 }
 
-/// Manifest objects under `url` (0 before the dataset exists).
-fn manifest_objects(url: &str) -> usize {
-    open_store(Path::new(url)).and_then(|s| s.list("manifest")).map(|l| l.len()).unwrap_or(0)
+/// A counter of the manifest objects under `url` (0 before the dataset exists), on one store client.
+fn manifest_counter(url: &str) -> impl Fn() -> usize {
+    let store = open_store(Path::new(url)).unwrap();
+    move || store.list("manifest").map(|l| l.len()).unwrap_or(0)
 }
 
 #[test]
@@ -135,14 +136,15 @@ fn sigkills_during_an_s3_build_then_resume_give_the_same_dataset_and_repair_leav
     ok(build(&moto.endpoint(), &config, local.to_str().unwrap()).output().unwrap());
     let reference = digests(local.to_str().unwrap());
     let url = "s3://kills/ds";
+    let manifest_objects = manifest_counter(url);
     let (total, mut log) = (20, Vec::new());
     let mut rng = pointreggpt::rng::Rng::new(18);
     for i in 0..8 {
         let mut child = build(&moto.endpoint(), &config, url).spawn().unwrap();
         if i % 2 == 0 {
             // Wait until this run committed a shard of its own, then kill within 0..150 ms: mid-build.
-            let (before, t0) = (manifest_objects(url), Instant::now());
-            while manifest_objects(url) == before && child.try_wait().unwrap().is_none() {
+            let (before, t0) = (manifest_objects(), Instant::now());
+            while manifest_objects() == before && child.try_wait().unwrap().is_none() {
                 assert!(t0.elapsed() < Duration::from_secs(120), "no shard committed in 2 minutes");
                 std::thread::sleep(Duration::from_millis(5));
             }
@@ -272,9 +274,10 @@ fn a_store_that_goes_away_mid_build_keeps_every_committed_shard_and_the_build_fa
     let reference = digests(local.to_str().unwrap());
     let url = "s3://flaky/ds";
     let proxy = Proxy::start(moto.port);
+    let manifest_objects = manifest_counter(url);
     let child = build(&proxy.endpoint(), &config, url).spawn().unwrap();
     let t0 = Instant::now();
-    while manifest_objects(url) < 2 {
+    while manifest_objects() < 2 {
         assert!(t0.elapsed() < Duration::from_secs(120), "no shard committed in 2 minutes");
         std::thread::sleep(Duration::from_millis(5));
     }

@@ -38,12 +38,12 @@ pub fn object_id() -> String {
 }
 
 impl ObjectDatasetStore {
-    /// Commits `batch` as described in the module docs (`part_size`: bytes per multipart part).
+    /// Commits `batch` as described in the module docs, in parts of [`PART_SIZE`] above that size.
     pub(super) fn commit_object(&self, entry: ManifestEntry, batch: &RecordBatch) -> Result<ManifestEntry> {
         self.commit_object_with(entry, batch, PART_SIZE)
     }
 
-    /// [`Self::commit_object`] with another part size (tests exercise multipart uploads with it).
+    /// [`Self::commit_object`] with parts of `part_size` bytes (tests exercise multipart uploads with it).
     pub fn commit_object_with(&self, mut entry: ManifestEntry, batch: &RecordBatch, part_size: usize) -> Result<ManifestEntry> {
         let stem = shard_stem(&entry.table, entry.shard);
         let file = format!("{stem}-{}.parquet", object_id());
