@@ -213,6 +213,15 @@ fn two_writers_racing_on_the_same_shards_leave_one_object_per_shard() {
     let shards: Vec<String> = objects(&moto.endpoint(), "race", "threads").into_keys().filter(|k| k.starts_with("shards/")).collect();
     assert_eq!(shards, [format!("shards/{}", entries[0].file)]);
     assert_eq!(ds.read_pairs().unwrap(), rows);
+
+    // An entry whose object is gone: verify reports it, and the next commit replaces the entry (a
+    // conditional put on its ETag) instead of adopting it.
+    peer(&moto.endpoint(), &["delete", &moto.endpoint(), "race", &format!("threads/shards/{}", entries[0].file)]);
+    assert!(!ds.verify().unwrap().is_ok());
+    let again = ds.commit_pairs(0, 0, 2, &rows).unwrap();
+    assert_ne!(again.file, entries[0].file);
+    assert_eq!(ds.read_pairs().unwrap(), rows);
+    assert!(ds.verify().unwrap().is_ok());
 }
 
 #[test]

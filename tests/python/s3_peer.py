@@ -4,6 +4,7 @@
   rows-local FOLDER                the same from a dataset folder
   uploads ENDPOINT BUCKET          incomplete multipart uploads (boto3)
   objects ENDPOINT BUCKET PREFIX   every key under PREFIX with its size and ETag (boto3)
+  delete ENDPOINT BUCKET KEY       deletes one object (boto3)
   abandon ENDPOINT BUCKET PREFIX RECORD OBJECT   a writer that died mid multipart upload: one part sent, record written
 
 Rows are printed as JSON: {pair_key: [status, overlap_source, n_source_points, n_target_points, unit_index]}.
@@ -83,6 +84,9 @@ def main():
         endpoint, bucket, prefix = args
         listed = boto(endpoint).list_objects_v2(Bucket=bucket, Prefix=prefix + "/").get("Contents", [])
         print(json.dumps({o["Key"][len(prefix) + 1 :]: [o["Size"], o["ETag"].strip('"')] for o in listed}))
+    elif cmd == "delete":
+        endpoint, bucket, key = args
+        boto(endpoint).delete_object(Bucket=bucket, Key=key)
     elif cmd == "abandon":
         endpoint, bucket, prefix, record, obj = args
         s3 = boto(endpoint)
