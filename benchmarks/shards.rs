@@ -1,5 +1,11 @@
 //! Shard write and read throughput: our Parquet writer/reader (rows ↔ Arrow ↔ zstd Parquet) against
-//! pyarrow writing and reading the very same table, in the same run. Run: `cargo bench --bench shards`.
+//! pyarrow writing and reading the very same table, in the same run; then the dataset's commit and read
+//! on a local S3 server (moto, as in tests/store.rs) against a local folder: throughput of whole shards
+//! and the latency of committing small shards. Run: `cargo bench --bench shards`.
+
+#[path = "../tests/support/store.rs"]
+#[allow(dead_code)]
+mod store;
 
 use pointreggpt::geometry::Point;
 use pointreggpt::rng::Rng;
@@ -46,6 +52,11 @@ fn row(i: u64, rng: &mut Rng) -> PairRow {
         stages: "[]".into(),
         timings: vec![StageTiming { stage: "ingest".into(), ms: 1.0 }],
     }
+}
+
+/// The Python interpreter of the peers (`PYTHON`, default `python3`); `store` starts moto with it.
+fn python() -> String {
+    std::env::var("PYTHON").unwrap_or_else(|_| "python3".into())
 }
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -120,4 +131,55 @@ print(statistics.median(w), statistics.median(r))
     }
     println!("(pyarrow writes the same Arrow table with zstd level 3; its read includes materialising the point lists)");
     let _ = std::fs::remove_dir_all(&dir);
+    store_vs_folder(&rows);
+}
+
+/// Commits and reads of whole shards, and the commit latency of small shards, on moto vs a folder.
+fn store_vs_folder(rows: &[PairRow]) {
+    use pointreggpt::shards::dataset::Dataset;
+    let moto = store::Moto::start();
+    moto.set_env();
+    moto.create_bucket("bench");
+    let dir = tempfile::tempdir().unwrap();
+    let local = dir.path().join("ds");
+    let targets = [("folder", local.to_str().unwrap().to_string()), ("s3 (moto)", "s3://bench/ds".to_string())];
+    let n = rows.len() as u64;
+    let reps = 3;
+    println!();
+    println!("dataset commit and read: local S3 server (moto on 127.0.0.1) vs a folder, median of {reps}");
+    println!("{:<12} {:>14} {:>14} {:>14} {:>14} {:>20}", "where", "commit ms", "commit MB/s", "read ms", "read MB/s", "small commit ms/shard");
+    let mut results = Vec::new();
+    for (name, at) in &targets {
+        let ds = Dataset::create_or_open(at, "seed = 1\n", "bench").unwrap();
+        let (mut commit, mut read, mut mb) = (Vec::new(), Vec::new(), 0.0);
+        for rep in 0..reps {
+            let t = Instant::now();
+            let entry = ds.commit_pairs(rep, rep * n, n, rows).unwrap();
+            commit.push(t.elapsed().as_secs_f64() * 1e3);
+            mb = entry.bytes as f64 / 1e6;
+            let t = Instant::now();
+            let back: usize = ds.read_shard_batches(&entry).unwrap().iter().map(|b| batch_to_pairs(b).unwrap().len()).sum();
+            read.push(t.elapsed().as_secs_f64() * 1e3);
+            assert_eq!(back as u64, n);
+        }
+        // Commit latency: 20 shards of one small row each (no clouds, no PNGs).
+        let small = PairRow { unit_index: 0, ..Default::default() };
+        let mut latency = Vec::new();
+        for k in 0..20u64 {
+            let t = Instant::now();
+            ds.commit_pairs(100 + k, 1000 + k, 1, &[PairRow { unit_index: 1000 + k, ..small.clone() }]).unwrap();
+            latency.push(t.elapsed().as_secs_f64() * 1e3);
+        }
+        let (c, r, l) = (median(commit), median(read), median(latency));
+        println!("{name:<12} {c:>14.1} {:>14.1} {r:>14.1} {:>14.1} {l:>20.2}", mb / (c / 1e3), mb / (r / 1e3));
+        results.push((c, r, l));
+    }
+    let (f, s) = (results[0], results[1]);
+    println!(
+        "s3/folder time ratios: commit {:.2}, read {:.2}, small-shard commit latency {:.2} ({mb_note})",
+        s.0 / f.0,
+        s.1 / f.1,
+        s.2 / f.2,
+        mb_note = "a shard commit on the store is 4 requests: upload record, object, create-only manifest entry, record delete"
+    );
 }

@@ -4,6 +4,8 @@
 # preemption resumes: committed shards are skipped, half-written ones are redone.
 #
 #   sbatch --array=0-15 pipelines/slurm-build.sh pipelines/paper-3dmatch.toml /shared/datasets/prgpt
+#   sbatch --array=0-15 pipelines/slurm-build.sh pipelines/paper-3dmatch.toml s3://my-bucket/prgpt   # no shared folder
+#                                                              (credentials from AWS_* or AWS_PROFILE, exported before sbatch)
 #
 #SBATCH --job-name=pointreggpt-build
 #SBATCH --cpus-per-task=8

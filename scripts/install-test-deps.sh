@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Installs the Python modules the integration tests need, pinned: pyarrow and duckdb, which they read shards
-# with (tests/python/read_shards.py), and torch 2.13.0 with safetensors, which tests/checkpoints.rs saves and
-# converts the authors' kind of checkpoints with (through scripts/install-network-peers.sh: PyPI's CUDA
+# with (tests/python/read_shards.py); moto[s3] with flask and flask-cors, the local S3 server tests/store.rs
+# starts (`python3 -m moto.server`; it brings boto3, which tests/python/s3_peer.py uses); and torch 2.13.0
+# with safetensors, which tests/checkpoints.rs saves and converts the authors' kind of checkpoints with (through scripts/install-network-peers.sh: PyPI's CUDA
 # build, ~3 GB to download, 4.6 GB installed, 54 s here; it runs on the CPU). `make test` and .ci/run run
 # this first.
 #
@@ -12,7 +13,10 @@ set -euo pipefail
 PYTHON="${PYTHON:-python3}"
 PYARROW_VERSION="26.0.1"
 DUCKDB_VERSION="2.0.0"
-CHECK='import pyarrow, duckdb'
+MOTO_VERSION="5.2.1"
+FLASK_VERSION="3.1.3"
+FLASK_CORS_VERSION="6.0.2"
+CHECK='import pyarrow, duckdb, moto.server, flask, flask_cors, boto3'
 
 die() {
     echo "install-test-deps: $*" >&2
@@ -28,7 +32,7 @@ torch_peers() {
 }
 
 if modules_import; then
-    echo "install-test-deps: already installed ($("$PYTHON" -c 'import pyarrow, duckdb; print("pyarrow", pyarrow.__version__, "duckdb", duckdb.__version__)'))"
+    echo "install-test-deps: already installed ($("$PYTHON" -c 'import pyarrow, duckdb, importlib.metadata as m; print("pyarrow", pyarrow.__version__, "duckdb", duckdb.__version__, "moto", m.version("moto"))'))"
     torch_peers
     exit 0
 fi
@@ -36,15 +40,16 @@ fi
 command -v "$PYTHON" >/dev/null 2>&1 || die "no Python interpreter '$PYTHON' (set PYTHON=...)"
 "$PYTHON" -m pip --version >/dev/null 2>&1 || die "'$PYTHON -m pip' does not work; install pip first"
 
-echo "install-test-deps: $PYTHON -m pip install pyarrow==$PYARROW_VERSION duckdb==$DUCKDB_VERSION"
+echo "install-test-deps: $PYTHON -m pip install pyarrow==$PYARROW_VERSION duckdb==$DUCKDB_VERSION moto[s3]==$MOTO_VERSION flask==$FLASK_VERSION flask-cors==$FLASK_CORS_VERSION"
 if ! "$PYTHON" -m pip install --disable-pip-version-check -q \
-    "pyarrow==$PYARROW_VERSION" "duckdb==$DUCKDB_VERSION"; then
+    "pyarrow==$PYARROW_VERSION" "duckdb==$DUCKDB_VERSION" "moto[s3]==$MOTO_VERSION" \
+    "flask==$FLASK_VERSION" "flask-cors==$FLASK_CORS_VERSION"; then
     die "pip install failed: is PyPI reachable? (see pip's message above)"
 fi
 
 if ! modules_import; then
     "$PYTHON" -c "$CHECK" || true
-    die "pyarrow and duckdb were installed but do not import (see the error above)"
+    die "pyarrow, duckdb and moto were installed but do not import (see the error above)"
 fi
 torch_peers
 echo "install-test-deps: done"

@@ -25,6 +25,10 @@ pub enum Error {
     #[error("invalid argument: {0}")]
     InvalidArgument(String),
 
+    /// An object store (S3, GCS, Azure) refused or failed a request; `url` names the dataset or object.
+    #[error("{url}: {message}")]
+    Store { url: String, message: String },
+
     /// libtorch reported an error.
     #[error("torch: {0}")]
     Torch(String),

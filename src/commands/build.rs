@@ -9,8 +9,10 @@ use std::path::{Path, PathBuf};
 
 #[derive(Debug, clap::Args)]
 #[command(after_help = "Scale-out: run the same command as N workers (a Slurm job array, a Kubernetes Indexed Job, \
-or by hand with --worker i --workers N) on one dataset folder; worker i builds the shards k with k mod N = i. \
-An interrupted build resumes where it stopped when run again with the same config.")]
+or by hand with --worker i --workers N) on one dataset folder or bucket prefix (--out s3://bucket/prefix); worker i \
+builds the shards k with k mod N = i. An interrupted build resumes where it stopped when run again with the same config. \
+On an object store (no rename) each shard is an immutable object under a unique name, committed by creating its \
+manifest entry with a create-only put (schemas/store-protocol.md).")]
 pub struct BuildArgs {
     /// Pipeline config (TOML), for example pipelines/demo.toml.
     pub config: PathBuf,
@@ -21,8 +23,9 @@ pub struct BuildArgs {
 /// The flags `build` and `labels` share: where the dataset goes, overrides, the worker split.
 #[derive(Debug, clap::Args)]
 pub struct RunArgs {
-    /// Dataset folder; created, or resumed when it holds a dataset with the same config.
-    /// Default: out/<config file stem>.
+    /// Dataset folder or object-store URL (s3://bucket/prefix, gs://bucket/prefix, az://container/prefix;
+    /// credentials and endpoint from the usual AWS_*, GOOGLE_*, AZURE_* variables or ~/.aws profile);
+    /// created, or resumed when it holds a dataset with the same config. Default: out/<config file stem>.
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Override a config value (repeatable), e.g. --set voxelize.voxel=0.03 --set source.path=/data/3dmatch.
@@ -123,13 +126,23 @@ pub fn run(args: &BuildArgs, out: &mut dyn Write) -> Result<()> {
     writeln!(out, "rows written: {rows} ({})", if by.is_empty() { "none".into() } else { by.join(", ") }).map_err(w)?;
     writeln!(out, "time {:.1} s, {:.1} pairs/s", r.summary.wall.as_secs_f64(), r.summary.rate()).map_err(w)?;
     write!(out, "{}", r.summary.stage_table()).map_err(w)?;
-    writeln!(out, "committed shards: {}/shards/pairs-*.parquet (listed in {}/manifest/)", dataset.display(), dataset.display()).map_err(w)?;
-    writeln!(
-        out,
-        "query it, e.g.: python3 -c \"import duckdb; print(duckdb.sql(\\\"select status, count(*) n, avg(overlap_source) ov from '{}/shards/pairs-*.parquet' group by status\\\"))\"",
-        dataset.display()
-    )
-    .map_err(w)?;
+    if crate::shards::store::is_remote(&dataset) {
+        writeln!(out, "committed shards: the objects listed in {}/manifest/", dataset.display()).map_err(w)?;
+        writeln!(
+            out,
+            "query it, e.g.: pointreggpt query {} \"select status, count(*) n, avg(overlap_source) ov from pairs group by status\"",
+            dataset.display()
+        )
+        .map_err(w)?;
+    } else {
+        writeln!(out, "committed shards: {}/shards/pairs-*.parquet (listed in {}/manifest/)", dataset.display(), dataset.display()).map_err(w)?;
+        writeln!(
+            out,
+            "query it, e.g.: python3 -c \"import duckdb; print(duckdb.sql(\\\"select status, count(*) n, avg(overlap_source) ov from '{}/shards/pairs-*.parquet' group by status\\\"))\"",
+            dataset.display()
+        )
+        .map_err(w)?;
+    }
     if r.summary.cancelled {
         return Err(Error::Interrupted);
     }

@@ -88,7 +88,7 @@ dropped per map, SAE = the official depth-weighted error per map. U-Nets are rep
 filters (min-pool and 3x3 median, 0.0375 m) have no tau_m and are reported once."
 )]
 pub struct EvalCorrectionArgs {
-    /// Held-out label dataset(s); repeat to combine.
+    /// Held-out label dataset(s): folders or object-store URLs; repeat to combine.
     #[arg(long, required = true)]
     pub labels: Vec<PathBuf>,
     /// U-Net checkpoint with DepthAugment.

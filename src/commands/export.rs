@@ -13,7 +13,7 @@ use std::path::PathBuf;
 --where \"not (unit_index between 10 and 19)\", --where \"array_length(target_points) < 2000\". \
 The pointreggpt and geotransformer formats take ok rows only; ply writes every matching row.")]
 pub struct ExportArgs {
-    /// The dataset folder.
+    /// The dataset: a folder, or an object-store URL (s3://bucket/prefix, gs://bucket/prefix, az://container/prefix).
     pub dataset: PathBuf,
     /// Output layout.
     #[arg(long, value_enum)]

@@ -37,7 +37,7 @@ pub fn run(args: &LabelsArgs, out: &mut dyn Write) -> Result<()> {
     writeln!(out, "rows written: {} ({})", r.rows_by_status.values().sum::<u64>(), if by.is_empty() { "none".into() } else { by.join(", ") }).map_err(w)?;
     writeln!(out, "time {:.1} s, {:.2} windows/s", r.summary.wall.as_secs_f64(), r.summary.rate()).map_err(w)?;
     write!(out, "{}", r.summary.stage_table()).map_err(w)?;
-    writeln!(out, "shards: {}/shards/labels-*.parquet", dataset.display()).map_err(w)?;
+    writeln!(out, "shards: {}/shards/labels-*.parquet (those listed in {}/manifest/)", dataset.display(), dataset.display()).map_err(w)?;
     if r.summary.cancelled {
         return Err(Error::Interrupted);
     }

@@ -14,7 +14,7 @@ rendered into the target camera with the stored pose (red = source, green = targ
 --where takes a SQL predicate over the pairs table, as `pointreggpt export` does, e.g. --where \"status = 'low_overlap' \
 and scene like 'scene0%'\".")]
 pub struct PreviewArgs {
-    /// The dataset folder.
+    /// The dataset: a folder, or an object-store URL (s3://bucket/prefix, gs://bucket/prefix, az://container/prefix).
     pub dataset: PathBuf,
     /// Output folder (created); files are named <pair key, sanitized>.png.
     #[arg(long)]

@@ -13,7 +13,7 @@ pointreggpt query out/demo \"select floor(overlap_source*10)/10 bin, count(*) fr
 pointreggpt query out/demo \"select scene, count(*) pairs, avg(array_length(source_points)) pts from pairs group by scene\" --format csv\n  \
 pointreggpt query out/demo \"select shard, rows, bytes from manifest order by shard\"")]
 pub struct QueryArgs {
-    /// The dataset folder.
+    /// The dataset: a folder, or an object-store URL (s3://bucket/prefix, gs://bucket/prefix, az://container/prefix).
     pub dataset: PathBuf,
     /// The SQL statement. Tables: pairs, labels, manifest (committed shards only).
     pub sql: String,

@@ -12,7 +12,7 @@ use std::path::PathBuf;
 --where is a SQL predicate over the pairs table, as for `pointreggpt export`, e.g. \
 --where \"scene in ('a','b') and array_length(target_points) >= 2000\".")]
 pub struct StatsArgs {
-    /// The dataset folder.
+    /// The dataset: a folder, or an object-store URL (s3://bucket/prefix, gs://bucket/prefix, az://container/prefix).
     pub dataset: PathBuf,
     /// Output folder (created) for stats.txt and stats.png.
     #[arg(long)]

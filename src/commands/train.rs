@@ -120,7 +120,8 @@ Defaults per preset: paper = official (lr 4e-5, batch 4, 100 epochs, whole maps,
 16 epochs, 128x128 random crops, loss over pixels with input depth."
 )]
 pub struct TrainCorrectionArgs {
-    /// Training label dataset(s) (folders made by `pointreggpt labels`); repeat to combine.
+    /// Training label dataset(s) made by `pointreggpt labels`: folders or object-store URLs (s3://bucket/prefix, …);
+    /// repeat to combine.
     #[arg(long, required = true)]
     pub labels: Vec<PathBuf>,
     /// Validation label dataset(s); without, the last --val-fraction of the training windows is held out.

@@ -21,7 +21,7 @@ pub fn committed_row_count(ds: &Dataset) -> Result<u64> {
 pub fn for_each_row(ds: &Dataset, filter: &Filter, bar: &ProgressBar, mut f: impl FnMut(PairRow) -> Result<bool>) -> Result<u64> {
     let mut read = 0;
     for entry in ds.committed(PAIRS_TABLE)?.values() {
-        let path = ds.root().join("shards").join(&entry.file);
+        let path = ds.shard_file(entry);
         let mut rows = Vec::new();
         for batch in ds.read_shard_batches(entry)? {
             if let Some(m) = pairs_schema_mismatch(&batch.schema()) {

@@ -52,7 +52,7 @@ pub fn write_previews(ds: &Dataset, opts: &PreviewOptions) -> Result<Vec<PathBuf
 /// Counts the rows of `ds` matching `filter` with one SQL aggregate over the committed shards
 /// ([`stats::counts_sql`]): no row is decoded.
 pub fn collect_stats(ds: &Dataset, filter: &Filter) -> Result<Stats> {
-    let batches = crate::query::run_query(ds.root(), &stats::counts_sql(filter.sql()))?;
+    let batches = crate::query::run_query_on(ds, &stats::counts_sql(filter.sql()))?;
     Stats::from_counts(&batches)
 }
 

@@ -1,10 +1,12 @@
 //! SQL over a dataset with DataFusion: tables `pairs`, `labels` and `manifest`, registered over the
-//! committed shards only (a dataset still being built can be queried safely).
+//! committed shards only (a dataset still being built can be queried safely), in a folder or on an
+//! object store.
 
 pub mod output;
 
 use crate::error::{Error, Result};
-use crate::shards::dataset::Dataset;
+use crate::shards::dataset::{Dataset, SHARDS_DIR};
+use crate::shards::store::QueryTarget;
 use crate::shards::labels::{labels_schema, LABELS_TABLE};
 use crate::shards::{pairs_schema, ManifestEntry, PAIRS_TABLE};
 use datafusion::arrow::array::{ArrayRef, RecordBatch, StringArray, UInt64Array};
@@ -22,39 +24,48 @@ fn df_err(e: datafusion::error::DataFusionError) -> Error {
     Error::Parquet(format!("query: {e}"))
 }
 
-/// Runs `sql` over the dataset at `root` and returns the result batches.
+/// Runs `sql` over the dataset at `root` (a folder or an object-store URL) and returns the result batches.
 pub fn run_query(root: &Path, sql: &str) -> Result<Vec<RecordBatch>> {
-    let ds = Dataset::open(root)?;
+    run_query_on(&Dataset::open(root)?, sql)
+}
+
+/// Runs `sql` over the committed shards of `ds`. On an object store, DataFusion reads the shard objects
+/// where they are (ranged reads through the dataset's own store client).
+pub fn run_query_on(ds: &Dataset, sql: &str) -> Result<Vec<RecordBatch>> {
+    // Everything that talks to the dataset's store runs before entering this function's runtime.
+    let pairs = ds.committed(PAIRS_TABLE)?;
+    let labels = ds.committed(LABELS_TABLE)?;
+    let targets = |entries: &std::collections::BTreeMap<u64, ManifestEntry>| -> Result<Vec<QueryTarget>> {
+        entries.values().map(|e| ds.store().query_target(&format!("{SHARDS_DIR}/{}", e.file))).collect()
+    };
+    let (pair_files, label_files) = (targets(&pairs)?, targets(&labels)?);
+    let entries: Vec<ManifestEntry> = pairs.into_values().chain(labels.into_values()).collect();
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(rayon::current_num_threads().max(1))
+        .enable_all()
         .build()
         .map_err(|e| Error::Internal(format!("tokio runtime: {e}")))?;
     runtime.block_on(async {
         let ctx = SessionContext::new();
-        register_table(&ctx, &ds, PAIRS_TABLE, pairs_schema())?;
-        register_table(&ctx, &ds, LABELS_TABLE, labels_schema())?;
-        let mut entries: Vec<ManifestEntry> = ds.committed(PAIRS_TABLE)?.into_values().collect();
-        entries.extend(ds.committed(LABELS_TABLE)?.into_values());
+        if let Some((url, store)) = pair_files.iter().chain(&label_files).find_map(|t| t.store.clone()) {
+            ctx.register_object_store(&url, store);
+        }
+        register_table(&ctx, PAIRS_TABLE, pairs_schema(), &pair_files)?;
+        register_table(&ctx, LABELS_TABLE, labels_schema(), &label_files)?;
         ctx.register_table("manifest", Arc::new(manifest_table(&entries)?)).map_err(df_err)?;
         let df = ctx.sql(sql).await.map_err(df_err)?;
         df.collect().await.map_err(df_err)
     })
 }
 
-/// Registers `table` over the shard files its manifest entries list (an empty table if none).
-fn register_table(ctx: &SessionContext, ds: &Dataset, table: &str, schema: SchemaRef) -> Result<()> {
-    let committed = ds.committed(table)?;
-    if committed.is_empty() {
+/// Registers `table` over the committed shard files `files` (an empty table if none).
+fn register_table(ctx: &SessionContext, table: &str, schema: SchemaRef, files: &[QueryTarget]) -> Result<()> {
+    if files.is_empty() {
         let empty = MemTable::try_new(schema, vec![vec![]]).map_err(df_err)?;
         ctx.register_table(table, Arc::new(empty)).map_err(df_err)?;
         return Ok(());
     }
-    let mut urls = Vec::new();
-    for e in committed.values() {
-        let path = ds.root().join("shards").join(&e.file);
-        let abs = std::fs::canonicalize(&path).map_err(|err| Error::io(&path, err))?;
-        urls.push(ListingTableUrl::parse(abs.to_string_lossy()).map_err(df_err)?);
-    }
+    let urls = files.iter().map(|f| ListingTableUrl::parse(&f.url).map_err(df_err)).collect::<Result<Vec<_>>>()?;
     let options = ListingOptions::new(Arc::new(ParquetFormat::default())).with_file_extension(".parquet");
     let config = ListingTableConfig::new_with_multi_paths(urls).with_listing_options(options).with_schema(schema);
     let provider = ListingTable::try_new(config).map_err(df_err)?;

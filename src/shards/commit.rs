@@ -1,29 +1,26 @@
-//! Committing a shard ([`Dataset::commit_shard`]): Parquet to a temporary file, fsync, publish without
-//! replacing, then its manifest entry the same way; and withdrawing one ([`Dataset::retract`]).
+//! Committing a shard ([`Dataset::commit_shard`]) through the dataset's store (a folder: temporary file,
+//! fsync, publish without replacing; an object store: unique object, create-only manifest entry), and
+//! withdrawing one ([`Dataset::retract`]).
 
-use crate::atomic::{write_atomic, Publish, Published};
-use super::dataset::{Dataset, MANIFEST_DIR, PAIRS_TABLE, SHARDS_DIR};
+use super::dataset::{Dataset, MANIFEST_DIR, PAIRS_TABLE};
 use super::manifest::{check_table_name, shard_stem, utc_now, ManifestEntry};
 use super::pairs::pairs_to_batch;
-use super::parquet_io::{read_parquet_file, write_parquet_bytes};
 use super::row::PairRow;
 use super::schema::SCHEMA_VERSION_KEY;
 use super::CODE_VERSION;
 use crate::error::{Error, Result};
 use arrow::array::RecordBatch;
 use std::collections::BTreeMap;
-use std::fs;
-use std::path::Path;
 
 impl Dataset {
-
-    /// Commits `batch` as shard `shard` of `table` (work units `first_unit .. first_unit + units`):
-    /// Parquet to a temporary file, fsync, publish into `shards/`, fsync the folder, then the manifest
-    /// entry the same way. `rows_by_status` must add up to the batch's rows.
+    /// Commits `batch` as shard `shard` of `table` (work units `first_unit .. first_unit + units`): the
+    /// shard file, then its manifest entry, so that readers see the whole shard or nothing.
+    /// `rows_by_status` must add up to the batch's rows.
     ///
-    /// A published shard file is never replaced while it is a valid Parquet file of the same schema
-    /// and row count: a second committer of the same shard (committers of one dataset produce the same
-    /// rows, timings aside) adopts it and writes a manifest entry describing that file, so the entry and
+    /// Committers of one dataset produce the same rows (timings aside). In a folder, a published shard
+    /// file is never replaced while it is a valid Parquet file of the same schema and row count: a
+    /// second committer adopts it and writes an entry describing that file. On an object store the
+    /// first entry created wins and the other committers delete their objects. Either way the entry and
     /// the file always agree, however commits interleave.
     pub fn commit_shard(
         &self,
@@ -43,58 +40,24 @@ impl Dataset {
                 rows_by_status.values().sum::<u64>()
             )));
         }
-        // The folders may be missing in a copied dataset (`.tmp/` especially).
-        for dir in [self.root.join(SHARDS_DIR), self.root.join(MANIFEST_DIR), self.tmp_dir()] {
-            fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
-        }
-        let schema = batch.schema();
-        let bytes = write_parquet_bytes(&schema, std::slice::from_ref(batch))?;
-        let path = self.shard_path(table, shard);
-        let (size, hash) = match write_atomic(&self.tmp_dir(), &path, &bytes, Publish::KeepExisting)? {
-            Published::Written => (bytes.len() as u64, blake3::hash(&bytes)),
-            Published::AlreadyThere => self.adopt_or_replace(&path, batch, &bytes)?,
-        };
-        let entry = ManifestEntry {
+        let draft = ManifestEntry {
             table: table.to_string(),
             shard,
             first_unit,
             units,
             rows,
             rows_by_status,
-            file: format!("{}.parquet", shard_stem(table, shard)),
-            bytes: size,
-            blake3: hash.to_hex().to_string(),
-            schema_version: schema.metadata().get(SCHEMA_VERSION_KEY).cloned().unwrap_or_default(),
+            file: String::new(),
+            bytes: 0,
+            blake3: String::new(),
+            schema_version: batch.schema().metadata().get(SCHEMA_VERSION_KEY).cloned().unwrap_or_default(),
             config_hash: self.header.config_hash.clone(),
             code_version: CODE_VERSION.to_string(),
             worker: self.worker.clone(),
             created: utc_now(),
         };
-        let manifest = self.manifest_path(table, shard);
-        write_atomic(&self.tmp_dir(), &manifest, entry.to_json().as_bytes(), Publish::Replace)?;
-        Ok(entry)
+        self.store.commit(draft, batch)
     }
-
-
-    /// The shard file at `path` existed: keep it if it is a complete file like ours (same schema and
-    /// row count), else replace it with `bytes`. Returns the size and hash of the file now in place.
-    fn adopt_or_replace(&self, path: &Path, batch: &RecordBatch, bytes: &[u8]) -> Result<(u64, blake3::Hash)> {
-        let existing = fs::read(path).map_err(|e| Error::io(path, e))?;
-        let fits = match read_parquet_file(path) {
-            Ok((schema, batches)) => {
-                schema.fields() == batch.schema().fields()
-                    && batches.iter().map(|b| b.num_rows()).sum::<usize>() == batch.num_rows()
-            }
-            Err(_) => false,
-        };
-        if fits {
-            return Ok((existing.len() as u64, blake3::hash(&existing)));
-        }
-        tracing::warn!("{}: replacing an unusable uncommitted shard file", path.display());
-        write_atomic(&self.tmp_dir(), path, bytes, Publish::Replace)?;
-        Ok((bytes.len() as u64, blake3::hash(bytes)))
-    }
-
 
     /// Commits `rows` as shard `shard` of the `pairs` table (see [`Dataset::commit_shard`]).
     pub fn commit_pairs(&self, shard: u64, first_unit: u64, units: u64, rows: &[PairRow]) -> Result<ManifestEntry> {
@@ -105,17 +68,21 @@ impl Dataset {
         self.commit_shard(PAIRS_TABLE, shard, first_unit, units, &pairs_to_batch(rows)?, by_status)
     }
 
-
     /// Withdraws the manifest entry of a shard (the shard then no longer exists for readers and a resume
-    /// redoes it). Used by `verify --repair` on shards that fail verification.
+    /// redoes it; on an object store its object is deleted too). Used by `verify --repair` on shards
+    /// that fail verification.
     pub fn retract(&self, table: &str, shard: u64) -> Result<()> {
         check_table_name(table)?;
-        let path = self.manifest_path(table, shard);
-        match fs::remove_file(&path) {
-            Ok(()) => crate::atomic::sync_dir(&self.root.join(MANIFEST_DIR)),
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
-            Err(e) => Err(Error::io(&path, e)),
-        }
+        let stem = shard_stem(table, shard);
+        let rel = format!("{MANIFEST_DIR}/{stem}.json");
+        let file = self
+            .store
+            .read_text(&rel)?
+            .and_then(|t| serde_json::from_str::<ManifestEntry>(&t).ok())
+            .map(|e| e.file)
+            .filter(|f| f.starts_with(&format!("{stem}-")))
+            .unwrap_or_default();
+        self.store.retract(&rel, &file)
     }
 }
 
@@ -124,8 +91,9 @@ mod tests {
     use super::*;
     use crate::atomic::list_temps;
     use crate::shards::dataset::tests::{rows, CONFIG};
-    use crate::shards::dataset::TMP_DIR;
+    use crate::shards::dataset::{SHARDS_DIR, TMP_DIR};
     use crate::shards::read::list_files;
+    use std::fs;
     use crate::shards::row::Status;
 
     #[test]

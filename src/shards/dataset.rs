@@ -1,6 +1,6 @@
-//! The dataset folder: opening or creating it (`dataset.toml` with its `[dataset]` header, refusing another
-//! config), its paths, and its temporary files. Committing shards is [`super::commit`], reading them back
-//! [`super::read`], checking them [`super::verify`].
+//! The dataset: opening or creating it (`dataset.toml` with its `[dataset]` header, refusing another
+//! config) in a folder or at an object-store URL ([`super::store`]), its paths, and its temporary files.
+//! Committing shards is [`super::commit`], reading them back [`super::read`], checking them [`super::verify`].
 //!
 //! See the module docs of [`crate::shards`] for the layout and the commit protocol.
 
@@ -8,19 +8,12 @@ use super::config_diff::config_differences;
 use super::manifest::{shard_stem, utc_now};
 use super::schema::SCHEMA_VERSION;
 use super::CODE_VERSION;
-use crate::atomic::{hostname, list_temps, write_atomic, Publish, Published};
+pub use super::store::{DATASET_FILE, MANIFEST_DIR, SHARDS_DIR, TMP_DIR};
+use super::store::{open_store, DatasetStore};
+use crate::atomic::{hostname, Published};
 use crate::error::{Error, Result};
-use std::fs;
 use std::path::{Path, PathBuf};
-
-/// The file at the dataset's root holding the resolved config and the `[dataset]` header.
-pub const DATASET_FILE: &str = "dataset.toml";
-/// Folder of the committed shard files.
-pub const SHARDS_DIR: &str = "shards";
-/// Folder of the manifest entries.
-pub const MANIFEST_DIR: &str = "manifest";
-/// Folder of the files being written.
-pub const TMP_DIR: &str = ".tmp";
+use std::sync::Arc;
 /// The table of [`PairRow`]s.
 pub const PAIRS_TABLE: &str = "pairs";
 
@@ -37,10 +30,10 @@ pub struct DatasetHeader {
     pub created: String,
 }
 
-/// A dataset folder, opened for committing shards or for reading them.
+/// A dataset (a folder or an object-store prefix), opened for committing shards or for reading them.
 #[derive(Clone, Debug)]
 pub struct Dataset {
-    pub(super) root: PathBuf,
+    pub(super) store: Arc<dyn DatasetStore>,
     pub(super) header: DatasetHeader,
     /// Worker id recorded in manifest entries.
     pub(super) worker: String,
@@ -54,7 +47,6 @@ impl Dataset {
     /// `config_hash`, this is refused with a message naming the differing config keys. Processes racing
     /// to create the same dataset with the same config all succeed.
     pub fn create_or_open(root: impl AsRef<Path>, resolved_config_toml: &str, config_hash: &str) -> Result<Dataset> {
-        let root = root.as_ref().to_path_buf();
         if config_hash.is_empty() {
             return Err(Error::InvalidArgument("empty config hash".into()));
         }
@@ -64,11 +56,9 @@ impl Dataset {
         if config.contains_key("dataset") {
             return Err(Error::config("dataset", "the top-level key `dataset` is reserved for the dataset header"));
         }
-        for dir in [root.clone(), root.join(SHARDS_DIR), root.join(MANIFEST_DIR), root.join(TMP_DIR)] {
-            fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
-        }
-        let path = root.join(DATASET_FILE);
-        if !path.exists() {
+        let store = open_store(root.as_ref())?;
+        store.prepare()?;
+        if store.read_text(DATASET_FILE)?.is_none() {
             let header = DatasetHeader {
                 config_hash: config_hash.to_string(),
                 schema_version: SCHEMA_VERSION.to_string(),
@@ -77,28 +67,30 @@ impl Dataset {
             };
             let text = dataset_file_text(&header, resolved_config_toml);
             // Never replace: a racing creator may have published first; then compare with its file.
-            if write_atomic(&root.join(TMP_DIR), &path, text.as_bytes(), Publish::KeepExisting)? == Published::Written {
-                return Ok(Dataset::with_header(root, header));
+            if store.create_text(DATASET_FILE, &text)? == Published::Written {
+                return Ok(Dataset::with_header(store, header));
             }
         }
-        let (header, recorded) = read_dataset_file(&root)?;
+        let (header, recorded) = read_dataset_file(store.as_ref())?;
         if header.config_hash != config_hash {
-            return Err(config_mismatch(&root, &header, &recorded, &config, config_hash));
+            return Err(config_mismatch(store.root(), &header, &recorded, &config, config_hash));
         }
-        check_schema_version(&root, &header)?;
-        Ok(Dataset::with_header(root, header))
+        check_schema_version(store.as_ref(), &header)?;
+        Ok(Dataset::with_header(store, header))
     }
 
-    /// Opens an existing dataset for reading (or committing with its recorded config).
+    /// Opens an existing dataset for reading (or committing with its recorded config): a folder, or an
+    /// object-store URL (`s3://bucket/prefix`, `gs://…`, `az://…`).
     pub fn open(root: impl AsRef<Path>) -> Result<Dataset> {
-        let root = root.as_ref().to_path_buf();
-        let (header, _) = read_dataset_file(&root)?;
-        check_schema_version(&root, &header)?;
-        Ok(Dataset::with_header(root, header))
+        let store = open_store(root.as_ref())?;
+        store.check_reachable()?;
+        let (header, _) = read_dataset_file(store.as_ref())?;
+        check_schema_version(store.as_ref(), &header)?;
+        Ok(Dataset::with_header(store, header))
     }
 
-    fn with_header(root: PathBuf, header: DatasetHeader) -> Dataset {
-        Dataset { root, header, worker: format!("{}:{}", hostname(), std::process::id()) }
+    fn with_header(store: Arc<dyn DatasetStore>, header: DatasetHeader) -> Dataset {
+        Dataset { store, header, worker: format!("{}:{}", hostname(), std::process::id()) }
     }
 
     /// Sets the worker id recorded in manifest entries (default `<host>:<pid>`).
@@ -107,9 +99,14 @@ impl Dataset {
         self
     }
 
-    /// The dataset folder.
+    /// The dataset folder, or its URL (as a path) on an object store.
     pub fn root(&self) -> &Path {
-        &self.root
+        self.store.root()
+    }
+
+    /// Where the dataset's files are.
+    pub fn store(&self) -> &dyn DatasetStore {
+        self.store.as_ref()
     }
 
     /// The `[dataset]` header of `dataset.toml`.
@@ -117,34 +114,27 @@ impl Dataset {
         &self.header
     }
 
-    /// Where shard `shard` of `table` lives (committed or not).
+    /// Where shard `shard` of `table` lives in a folder (committed or not). On an object store the
+    /// shard's object has a unique name: its manifest entry's `file`.
     pub fn shard_path(&self, table: &str, shard: u64) -> PathBuf {
-        self.root.join(SHARDS_DIR).join(format!("{}.parquet", shard_stem(table, shard)))
+        self.store.locate(&format!("{SHARDS_DIR}/{}.parquet", shard_stem(table, shard)))
     }
 
     /// Where the manifest entry of shard `shard` of `table` lives.
     pub fn manifest_path(&self, table: &str, shard: u64) -> PathBuf {
-        self.root.join(MANIFEST_DIR).join(format!("{}.json", shard_stem(table, shard)))
+        self.store.locate(&format!("{MANIFEST_DIR}/{}.json", shard_stem(table, shard)))
     }
 
-    /// The folder of temporary files.
+    /// The folder of temporary files (upload records on an object store).
     pub fn tmp_dir(&self) -> PathBuf {
-        self.root.join(TMP_DIR)
+        self.store.locate(TMP_DIR)
     }
-    /// Removes the temporary files left on this host by processes that no longer run; other live
-    /// processes' (and other hosts') files stay. Returns the removed paths.
+
+    /// Removes the temporary files left by processes that no longer run (on an object store: upload
+    /// records of dead writers, with their uncommitted objects and incomplete multipart uploads); live
+    /// processes' (and, locally, other hosts') files stay. Returns what was removed.
     pub fn clean_stale_temps(&self) -> Result<Vec<PathBuf>> {
-        let mut removed = Vec::new();
-        for (path, name) in list_temps(&self.tmp_dir())? {
-            if name.is_some_and(|n| n.is_stale()) {
-                match fs::remove_file(&path) {
-                    Ok(()) => removed.push(path),
-                    Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
-                    Err(e) => return Err(Error::io(&path, e)),
-                }
-            }
-        }
-        Ok(removed)
+        self.store.clean_stale()
     }
 }
 /// `dataset.toml`: a comment, the header as dotted `dataset.*` keys (they must precede every table), then
@@ -165,15 +155,11 @@ fn dataset_file_text(header: &DatasetHeader, config: &str) -> String {
     )
 }
 
-/// The header and the recorded config (without the `dataset` table) of the dataset at `root`.
-fn read_dataset_file(root: &Path) -> Result<(DatasetHeader, toml::Table)> {
-    let path = root.join(DATASET_FILE);
-    let text = match fs::read_to_string(&path) {
-        Ok(t) => t,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
-            return Err(Error::input(root, format!("not a pointreggpt dataset: it has no {DATASET_FILE}")))
-        }
-        Err(e) => return Err(Error::io(&path, e)),
+/// The header and the recorded config (without the `dataset` table) of the dataset in `store`.
+fn read_dataset_file(store: &dyn DatasetStore) -> Result<(DatasetHeader, toml::Table)> {
+    let path = store.locate(DATASET_FILE);
+    let Some(text) = store.read_text(DATASET_FILE)? else {
+        return Err(Error::input(store.root(), format!("not a pointreggpt dataset: it has no {DATASET_FILE}")));
     };
     let mut table: toml::Table = text.parse().map_err(|e| Error::input(&path, format!("not valid TOML: {e}")))?;
     let Some(toml::Value::Table(head)) = table.remove("dataset") else {
@@ -194,12 +180,12 @@ fn read_dataset_file(root: &Path) -> Result<(DatasetHeader, toml::Table)> {
     Ok((header, table))
 }
 
-fn check_schema_version(root: &Path, header: &DatasetHeader) -> Result<()> {
+fn check_schema_version(store: &dyn DatasetStore, header: &DatasetHeader) -> Result<()> {
     if header.schema_version == SCHEMA_VERSION {
         return Ok(());
     }
     Err(Error::input(
-        root.join(DATASET_FILE),
+        store.locate(DATASET_FILE),
         format!(
             "the dataset's schema is {}, this {CODE_VERSION} reads and writes {SCHEMA_VERSION}: use a matching \
              pointreggpt, or build into a new output folder",
@@ -242,7 +228,7 @@ fn config_mismatch(
     msg.push_str(&format!(
         "\nA dataset holds the output of one config: write this run to a new output folder, or rerun with the \
          config recorded in {} to resume the dataset.",
-        root.join(DATASET_FILE).display()
+        root.display().to_string().trim_end_matches('/').to_string() + "/" + DATASET_FILE
     ));
     Error::config("config", msg)
 }
@@ -250,7 +236,8 @@ fn config_mismatch(
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
-    use crate::atomic::TempName;
+    use crate::atomic::{list_temps, TempName};
+    use std::fs;
     use crate::shards::pairs::tests::sample_row;
     use crate::shards::row::PairRow;
 

@@ -23,7 +23,8 @@ pub struct ManifestEntry {
     pub rows: u64,
     /// Rows per status.
     pub rows_by_status: BTreeMap<String, u64>,
-    /// File name in `shards/`.
+    /// File name in `shards/`: `<table>-<shard:06>.parquet` in a folder, `<table>-<shard:06>-<id>.parquet`
+    /// (an immutable object under a unique name) on an object store.
     pub file: String,
     /// Size of the file.
     pub bytes: u64,
@@ -56,6 +57,19 @@ pub fn parse_shard_file_name<'a>(name: &'a str, ext: &str) -> Option<(&'a str, u
     Some((table, shard.parse().ok()?))
 }
 
+/// Parses a shard object's name `<table>-<digits>-<id>.parquet` (id: lowercase hex or letters and
+/// digits) into (table, shard, id).
+pub fn parse_object_file_name(name: &str) -> Option<(&str, u64, &str)> {
+    let stem = name.strip_suffix(".parquet")?;
+    let (table, rest) = stem.split_once('-')?;
+    let (shard, id) = rest.split_once('-')?;
+    let id_ok = !id.is_empty() && id.bytes().all(|b| b.is_ascii_lowercase() || b.is_ascii_digit());
+    if shard.len() < 6 || !shard.bytes().all(|b| b.is_ascii_digit()) || !id_ok || check_table_name(table).is_err() {
+        return None;
+    }
+    Some((table, shard.parse().ok()?, id))
+}
+
 /// Table names are `[a-z0-9_]+` (they become file names and are split at the last `-`).
 pub fn check_table_name(table: &str) -> Result<()> {
     if !table.is_empty() && table.bytes().all(|b| b.is_ascii_lowercase() || b.is_ascii_digit() || b == b'_') {
@@ -77,18 +91,26 @@ impl ManifestEntry {
     /// with its file name.
     pub fn read(path: &Path) -> Result<ManifestEntry> {
         let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
-        let entry: ManifestEntry =
-            serde_json::from_str(&text).map_err(|e| Error::input(path, format!("not a manifest entry: {e}")))?;
         let name = path.file_name().and_then(|n| n.to_str()).unwrap_or_default();
-        let expected = format!("{}.json", shard_stem(&entry.table, entry.shard));
+        ManifestEntry::parse(&text, name, path)
+    }
+
+    /// Parses and checks the text of the entry named `name` (at `location`, for messages): it must
+    /// agree with its name, and name a shard file of its own shard.
+    pub fn parse(text: &str, name: &str, location: &Path) -> Result<ManifestEntry> {
+        let entry: ManifestEntry =
+            serde_json::from_str(text).map_err(|e| Error::input(location, format!("not a manifest entry: {e}")))?;
+        let stem = shard_stem(&entry.table, entry.shard);
+        let expected = format!("{stem}.json");
         if name != expected {
-            return Err(Error::input(path, format!("entry is for {expected}, not {name}")));
+            return Err(Error::input(location, format!("entry is for {expected}, not {name}")));
         }
-        if entry.file != format!("{}.parquet", shard_stem(&entry.table, entry.shard)) {
-            return Err(Error::input(path, format!("entry names an unexpected shard file {:?}", entry.file)));
+        let own_object = parse_object_file_name(&entry.file).is_some_and(|(t, s, _)| t == entry.table && s == entry.shard);
+        if entry.file != format!("{stem}.parquet") && !own_object {
+            return Err(Error::input(location, format!("entry names an unexpected shard file {:?}", entry.file)));
         }
         if entry.rows_by_status.values().sum::<u64>() != entry.rows {
-            return Err(Error::input(path, "rows_by_status does not add up to rows"));
+            return Err(Error::input(location, "rows_by_status does not add up to rows"));
         }
         Ok(entry)
     }
@@ -156,6 +178,11 @@ mod tests {
         assert_eq!(parse_shard_file_name("pairs-12.parquet", "parquet"), None);
         assert_eq!(parse_shard_file_name("pairs-000012.json", "parquet"), None);
         assert_eq!(parse_shard_file_name("Pairs-000012.parquet", "parquet"), None);
+        assert_eq!(parse_object_file_name("pairs-000012-0a1b2c.parquet"), Some(("pairs", 12, "0a1b2c")));
+        assert_eq!(parse_object_file_name("my_labels-1234567-x9.parquet"), Some(("my_labels", 1_234_567, "x9")));
+        assert_eq!(parse_object_file_name("pairs-000012.parquet"), None);
+        assert_eq!(parse_object_file_name("pairs-000012-AB.parquet"), None);
+        assert_eq!(parse_object_file_name("pairs-12-ab.parquet"), None);
         assert!(check_table_name("labels").is_ok());
         assert!(check_table_name("a-b").is_err() && check_table_name("").is_err() && check_table_name("../x").is_err());
     }
@@ -175,6 +202,13 @@ mod tests {
         let bad = ManifestEntry { rows: 11, ..e.clone() };
         std::fs::write(&path, bad.to_json()).unwrap();
         assert!(ManifestEntry::read(&path).unwrap_err().to_string().contains("rows_by_status"));
+        // An object-store entry names its unique object; another shard's object is refused.
+        let object = ManifestEntry { file: "pairs-000012-00ff.parquet".into(), ..e.clone() };
+        std::fs::write(&path, object.to_json()).unwrap();
+        assert_eq!(ManifestEntry::read(&path).unwrap(), object);
+        let foreign = ManifestEntry { file: "pairs-000013-00ff.parquet".into(), ..e.clone() };
+        std::fs::write(&path, foreign.to_json()).unwrap();
+        assert!(ManifestEntry::read(&path).unwrap_err().to_string().contains("unexpected shard file"));
         std::fs::write(&path, "{\"table\": ").unwrap();
         assert!(matches!(ManifestEntry::read(&path).unwrap_err(), Error::InputData { .. }));
     }

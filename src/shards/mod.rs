@@ -25,6 +25,12 @@
 //! 3. write the manifest entry (row counts, size and blake3 of the published file, config hash, code
 //!    version, worker, time) the same way: temporary file, fsync, rename into `manifest/`, fsync.
 //!
+//! On an object store (`s3://`, `gs://`, `az://`; [`store`]) nothing can be renamed: each write of a shard
+//! is an immutable object under a unique name (`shards/<table>-<shard:06>-<id>.parquet`), committed by
+//! creating its manifest entry with a create-only put; the loser of a race deletes its object
+//! (`schemas/store-protocol.md`, [`store::object_commit`]). The rest of the code reaches the files only
+//! through [`store::DatasetStore`].
+//!
 //! Only shards with a manifest entry exist, for readers ([`Dataset::read_pairs`]) and for resume
 //! ([`Dataset::committed`]): a crash at any point leaves either a committed shard or nothing visible (an
 //! orphan shard file or a temporary file, which [`Dataset::verify`] lists and a resume redoes). Because a
@@ -44,16 +50,17 @@ pub mod read;
 pub mod parquet_io;
 pub mod row;
 pub mod schema;
+pub mod store;
 pub mod verify;
 
 pub use dataset::{Dataset, DatasetHeader, PAIRS_TABLE};
 pub use labels::{batch_to_labels, labels_schema, labels_to_batch, LabelRow, LABELS_TABLE};
 pub use manifest::ManifestEntry;
 pub use pairs::{batch_to_pairs, pairs_to_batch};
-pub use parquet_io::{read_parquet_file, write_parquet_bytes};
+pub use parquet_io::{read_parquet_bytes, read_parquet_file, write_parquet_bytes};
 pub use row::{PairRow, StageTiming, Status};
 pub use schema::{pairs_schema, SCHEMA_VERSION, SCHEMA_VERSION_KEY};
-pub use verify::{Problem, VerifyReport};
+pub use verify::{Problem, RepairReport, VerifyReport};
 
 /// The code version recorded in rows, manifest entries and `dataset.toml`.
 pub const CODE_VERSION: &str = concat!("pointreggpt ", env!("CARGO_PKG_VERSION"));

@@ -68,8 +68,17 @@ pub fn write_parquet_bytes(schema: &SchemaRef, batches: &[RecordBatch]) -> Resul
 /// [`Error::InputData`] naming it.
 pub fn read_parquet_file(path: &Path) -> Result<(SchemaRef, Vec<RecordBatch>)> {
     let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    decode(file, path)
+}
+
+/// The schema and every batch of a Parquet file held in memory (read from `location`, which errors name).
+pub fn read_parquet_bytes(bytes: bytes::Bytes, location: &Path) -> Result<(SchemaRef, Vec<RecordBatch>)> {
+    decode(bytes, location)
+}
+
+fn decode<R: parquet::file::reader::ChunkReader + 'static>(reader: R, path: &Path) -> Result<(SchemaRef, Vec<RecordBatch>)> {
     let bad = |e: &dyn std::fmt::Display| Error::input(path, format!("not a readable Parquet file: {e}"));
-    let builder = ParquetRecordBatchReaderBuilder::try_new(file).map_err(|e| bad(&e))?;
+    let builder = ParquetRecordBatchReaderBuilder::try_new(reader).map_err(|e| bad(&e))?;
     let schema = builder.schema().clone();
     let reader = builder.with_batch_size(READ_BATCH_ROWS).build().map_err(|e| bad(&e))?;
     let batches = reader.collect::<std::result::Result<Vec<_>, _>>().map_err(|e| bad(&e))?;

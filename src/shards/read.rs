@@ -4,16 +4,14 @@
 use super::dataset::{Dataset, MANIFEST_DIR, PAIRS_TABLE, SHARDS_DIR};
 use super::manifest::{check_table_name, parse_shard_file_name, ManifestEntry};
 use super::pairs::batch_to_pairs;
-use super::parquet_io::read_parquet_file;
+use super::parquet_io::read_parquet_bytes;
 use super::row::PairRow;
 use crate::error::{Error, Result};
 use arrow::array::RecordBatch;
 use std::collections::BTreeMap;
-use std::fs;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 impl Dataset {
-
     /// The committed shards of `table`, by shard index. A manifest entry that cannot be read, disagrees
     /// with its file name or has another config hash counts as not committed (a resume redoes the shard;
     /// [`Dataset::verify`] reports it).
@@ -26,15 +24,16 @@ impl Dataset {
         Ok(scan.entries.into_iter().filter(|((t, _), _)| t == table).map(|((_, s), e)| (s, e)).collect())
     }
 
-
     /// The committed shards of `table` that a resume may skip: those whose file exists with the size its
-    /// manifest entry records (a cheap check; `verify` also hashes and decodes). The others are redone.
+    /// manifest entry records (a cheap check: one listing; `verify` also hashes and decodes). The others
+    /// are redone.
     pub fn resumable(&self, table: &str) -> Result<BTreeMap<u64, ManifestEntry>> {
         let mut committed = self.committed(table)?;
+        let sizes: BTreeMap<String, u64> = self.store.list(SHARDS_DIR)?.into_iter().map(|l| (l.name, l.size)).collect();
         committed.retain(|_, e| {
-            let path = self.root.join(SHARDS_DIR).join(&e.file);
-            let ok = fs::metadata(&path).map(|m| m.len() == e.bytes).unwrap_or(false);
+            let ok = sizes.get(&e.file) == Some(&e.bytes);
             if !ok {
+                let path = self.shard_file(e);
                 tracing::warn!("{}: missing or not the size its manifest entry records; the shard will be redone", path.display());
             }
             ok
@@ -42,19 +41,23 @@ impl Dataset {
         Ok(committed)
     }
 
+    /// Where the file of a committed shard is (a path or URL).
+    pub fn shard_file(&self, entry: &ManifestEntry) -> PathBuf {
+        self.store.locate(&format!("{SHARDS_DIR}/{}", entry.file))
+    }
 
     /// The batches of a committed shard. Errors name the file when it is missing, has another size than
     /// its manifest entry says, does not decode or has another row count.
     pub fn read_shard_batches(&self, entry: &ManifestEntry) -> Result<Vec<RecordBatch>> {
-        let path = self.root.join(SHARDS_DIR).join(&entry.file);
-        let size = fs::metadata(&path).map_err(|e| Error::io(&path, e))?.len();
-        if size != entry.bytes {
+        let path = self.shard_file(entry);
+        let bytes = self.store.read_bytes(&format!("{SHARDS_DIR}/{}", entry.file))?;
+        if bytes.len() as u64 != entry.bytes {
             return Err(Error::input(
                 &path,
-                format!("{size} bytes, its manifest entry says {} (run `pointreggpt verify`)", entry.bytes),
+                format!("{} bytes, its manifest entry says {} (run `pointreggpt verify`)", bytes.len(), entry.bytes),
             ));
         }
-        let (_, batches) = read_parquet_file(&path)?;
+        let (_, batches) = read_parquet_bytes(bytes, &path)?;
         let rows: usize = batches.iter().map(|b| b.num_rows()).sum();
         if rows as u64 != entry.rows {
             return Err(Error::input(&path, format!("{rows} rows, its manifest entry says {}", entry.rows)));
@@ -62,12 +65,11 @@ impl Dataset {
         Ok(batches)
     }
 
-
     /// Every row of the committed `pairs` shards, sorted by `unit_index`.
     pub fn read_pairs(&self) -> Result<Vec<PairRow>> {
         let mut rows = Vec::new();
         for entry in self.committed(PAIRS_TABLE)?.values() {
-            let path = self.root.join(SHARDS_DIR).join(&entry.file);
+            let path = self.shard_file(entry);
             for batch in self.read_shard_batches(entry)? {
                 rows.extend(batch_to_pairs(&batch).map_err(|e| Error::input(&path, e.to_string()))?);
             }
@@ -76,23 +78,31 @@ impl Dataset {
         Ok(rows)
     }
 
-
     /// Reads every manifest entry: the valid ones by (table, shard), and the others with the reason.
     pub(crate) fn scan_manifest(&self) -> Result<ManifestScan> {
-        let dir = self.root.join(MANIFEST_DIR);
         let mut scan = ManifestScan::default();
-        for (path, name) in list_files(&dir)? {
-            let Some((table, shard)) = parse_shard_file_name(&name, "json") else {
-                scan.unreadable.push((path, "not a manifest entry name (<table>-<shard:06>.json)".into()));
-                continue;
+        let mut named = Vec::new();
+        for listed in self.store.list(MANIFEST_DIR)? {
+            let path = self.store.locate(&format!("{MANIFEST_DIR}/{}", listed.name));
+            match parse_shard_file_name(&listed.name, "json") {
+                Some((table, shard)) => named.push((table.to_string(), shard, listed.name, path)),
+                None => scan.unreadable.push((path, "not a manifest entry name (<table>-<shard:06>.json)".into())),
+            }
+        }
+        let rels: Vec<String> = named.iter().map(|(_, _, name, _)| format!("{MANIFEST_DIR}/{name}")).collect();
+        for ((table, shard, name, path), text) in named.into_iter().zip(self.store.read_texts(&rels)) {
+            let parsed = match text {
+                Ok(Some(t)) => ManifestEntry::parse(&t, &name, &path),
+                Ok(None) => continue, // withdrawn since the listing
+                Err(e) => Err(e),
             };
-            match ManifestEntry::read(&path) {
+            match parsed {
                 Ok(e) if e.config_hash != self.header.config_hash => scan.unreadable.push((
                     path,
                     format!("config hash {} is not the dataset's {}", e.config_hash, self.header.config_hash),
                 )),
                 Ok(e) => {
-                    scan.entries.insert((table.to_string(), shard), e);
+                    scan.entries.insert((table, shard), e);
                 }
                 Err(e) => scan.unreadable.push((path, e.to_string())),
             }
@@ -100,7 +110,6 @@ impl Dataset {
         Ok(scan)
     }
 }
-
 
 /// The manifest folder read by [`Dataset::scan_manifest`].
 #[derive(Default)]
@@ -110,21 +119,10 @@ pub(crate) struct ManifestScan {
 }
 
 /// The regular files of `dir` with their names, sorted (none if `dir` does not exist).
-pub(crate) fn list_files(dir: &Path) -> Result<Vec<(PathBuf, String)>> {
-    let entries = match fs::read_dir(dir) {
-        Ok(e) => e,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(vec![]),
-        Err(e) => return Err(Error::io(dir, e)),
-    };
-    let mut out = Vec::new();
-    for entry in entries {
-        let entry = entry.map_err(|e| Error::io(dir, e))?;
-        if entry.file_type().map_err(|e| Error::io(entry.path(), e))?.is_file() {
-            out.push((entry.path(), entry.file_name().to_string_lossy().into_owned()));
-        }
-    }
-    out.sort();
-    Ok(out)
+#[cfg(test)]
+pub(crate) fn list_files(dir: &std::path::Path) -> Result<Vec<(PathBuf, String)>> {
+    let store = super::store::local::LocalStore::new(dir.to_path_buf());
+    Ok(super::store::DatasetStore::list(&store, "")?.into_iter().map(|l| (dir.join(&l.name), l.name)).collect())
 }
 
 #[cfg(test)]
@@ -134,6 +132,7 @@ mod tests {
     use crate::shards::dataset::tests::{rows, CONFIG};
     use crate::shards::pairs::pairs_to_batch;
     use crate::shards::parquet_io::write_parquet_bytes;
+    use std::fs;
 
     #[test]
     fn uncommitted_files_are_invisible() {

@@ -1,10 +1,9 @@
 //! `verify`: proves every committed shard is the file its manifest entry describes, and lists leftovers.
 
-use crate::atomic::list_temps;
 use super::dataset::{Dataset, PAIRS_TABLE, SHARDS_DIR};
-use super::read::list_files;
 use super::manifest::{parse_shard_file_name, ManifestEntry};
-use super::parquet_io::read_parquet_file;
+use super::parquet_io::read_parquet_bytes;
+use crate::atomic::TempName;
 use super::schema::{pairs_schema_mismatch, SCHEMA_VERSION_KEY};
 use crate::error::{Error, Result};
 use arrow::array::{Array, StringArray};
@@ -35,10 +34,23 @@ pub struct VerifyReport {
     /// Shard files without a valid manifest entry: invisible to readers, redone by a resume (or a commit
     /// in progress right now).
     pub orphans: Vec<PathBuf>,
-    /// Temporary files of processes of this host that no longer run (`clean_stale_temps` removes them).
+    /// Temporary files of processes of this host that no longer run (`clean_stale_temps` removes them);
+    /// on an object store, upload records of dead writers or older than an hour.
     pub stale_temps: Vec<PathBuf>,
-    /// Temporary files of running processes, of other hosts, or with unknown names.
+    /// Temporary files (upload records) of running processes, of other hosts, or with unknown names.
     pub other_temps: Vec<PathBuf>,
+}
+
+/// What [`Dataset::repair`] did.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct RepairReport {
+    /// Manifest entries withdrawn (their shards are redone by the next build run).
+    pub retracted: usize,
+    /// Stale temporary files (upload records, with their objects and multipart uploads) removed.
+    pub cleaned: Vec<PathBuf>,
+    /// Uncommitted shard objects removed (object stores only: a folder's orphans are adopted or
+    /// replaced by the next commit of their shard).
+    pub orphans_removed: Vec<PathBuf>,
 }
 
 impl VerifyReport {
@@ -76,6 +88,10 @@ impl Dataset {
     /// committed byte once.
     pub fn verify(&self) -> Result<VerifyReport> {
         let mut report = VerifyReport::default();
+        // Shard files first, then leftovers, then the manifest: a shard file that no entry names and no
+        // leftover names at those later moments is not being written by anyone (see `store::object_commit`).
+        let files = self.store.list(SHARDS_DIR)?;
+        let leftovers = self.store.leftovers()?;
         let scan = self.scan_manifest()?;
         for (path, message) in scan.unreadable {
             let name = path.file_name().map(|n| n.to_string_lossy().to_string()).unwrap_or_default();
@@ -83,7 +99,7 @@ impl Dataset {
             report.problems.push(Problem { path, message, shard });
         }
         for entry in scan.entries.values() {
-            let path = self.root().join(SHARDS_DIR).join(&entry.file);
+            let path = self.shard_file(entry);
             match check_shard(self, entry) {
                 Ok(()) => {
                     *report.shards_ok.entry(entry.table.clone()).or_default() += 1;
@@ -92,28 +108,53 @@ impl Dataset {
                 Err(message) => report.problems.push(Problem { path, message, shard: Some((entry.table.clone(), entry.shard)) }),
             }
         }
-        for (path, name) in list_files(&self.root().join(SHARDS_DIR))? {
-            let committed = parse_shard_file_name(&name, "parquet")
-                .is_some_and(|(table, shard)| scan.entries.contains_key(&(table.to_string(), shard)));
-            if !committed {
-                report.orphans.push(path);
-            }
+        let named: std::collections::BTreeSet<&str> = scan.entries.values().map(|e| e.file.as_str()).collect();
+        for file in files.iter().filter(|f| !named.contains(f.name.as_str())) {
+            report.orphans.push(self.store.locate(&format!("{SHARDS_DIR}/{}", file.name)));
         }
-        for (path, name) in list_temps(&self.tmp_dir())? {
-            if name.is_some_and(|n| n.is_stale()) {
-                report.stale_temps.push(path);
+        for left in leftovers {
+            if left.stale {
+                report.stale_temps.push(left.location);
             } else {
-                report.other_temps.push(path);
+                report.other_temps.push(left.location);
             }
         }
         Ok(report)
+    }
+
+    /// Repairs what `report` (from [`Dataset::verify`]) found: withdraws the manifest entries of bad
+    /// shards (a resume redoes exactly those), removes stale temporary files (on an object store: aborts
+    /// the dead writers' multipart uploads and removes their uncommitted objects), and on an object
+    /// store removes the uncommitted objects that no writer is writing.
+    pub fn repair(&self, report: &VerifyReport) -> Result<RepairReport> {
+        let mut done = RepairReport::default();
+        for p in &report.problems {
+            if let Some((table, shard)) = &p.shard {
+                self.retract(table, *shard)?;
+                done.retracted += 1;
+            }
+        }
+        done.cleaned = self.clean_stale_temps()?;
+        let name = |p: &PathBuf| p.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+        let written: std::collections::BTreeSet<String> = report
+            .stale_temps
+            .iter()
+            .chain(&report.other_temps)
+            .filter_map(|p| TempName::parse(&name(p)).map(|t| t.target))
+            .collect();
+        let idle: Vec<String> = report.orphans.iter().map(name).filter(|n| !written.contains(n)).collect();
+        done.orphans_removed = self.store.remove_orphans(&idle)?;
+        Ok(done)
     }
 }
 
 /// Checks one committed shard against its entry; the error says what differs.
 fn check_shard(ds: &Dataset, entry: &ManifestEntry) -> std::result::Result<(), String> {
-    let path = ds.root().join(SHARDS_DIR).join(&entry.file);
-    let bytes = std::fs::read(&path).map_err(|e| format!("cannot read the committed shard: {e}"))?;
+    let path = ds.shard_file(entry);
+    let bytes = ds
+        .store()
+        .read_bytes(&format!("{SHARDS_DIR}/{}", entry.file))
+        .map_err(|e| format!("cannot read the committed shard: {e}"))?;
     if bytes.len() as u64 != entry.bytes {
         return Err(format!("{} bytes, the manifest entry says {}", bytes.len(), entry.bytes));
     }
@@ -121,7 +162,7 @@ fn check_shard(ds: &Dataset, entry: &ManifestEntry) -> std::result::Result<(), S
     if hash != entry.blake3 {
         return Err(format!("blake3 {hash}, the manifest entry says {}", entry.blake3));
     }
-    let (schema, batches) = read_parquet_file(&path).map_err(|e| match e {
+    let (schema, batches) = read_parquet_bytes(bytes, &path).map_err(|e| match e {
         Error::InputData { message, .. } => message,
         other => other.to_string(),
     })?;

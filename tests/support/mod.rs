@@ -2,6 +2,7 @@
 #![allow(dead_code)]
 
 pub mod ply;
+pub mod store;
 
 use std::path::PathBuf;
 

@@ -28,6 +28,16 @@ pub struct FrameSet {
 /// The build config a data argument stands for: a pipeline TOML (its `[source]`, `[select]` and
 /// `[working]` are used), or a folder of depth sequences (every frame, the default working resolution).
 pub fn data_config(input: &Path) -> Result<BuildConfig> {
+    if input.to_str().is_some_and(|s| s.contains("://")) {
+        return Err(Error::config(
+            "--data",
+            format!(
+                "{}: a URL; --data takes a pipeline TOML or a local folder of depth sequences (source frames are read \
+                 from local folders; datasets of pairs and labels can live on object stores)",
+                input.display()
+            ),
+        ));
+    }
     if input.is_dir() {
         let text = format!("[source]\nkind = \"directory\"\npath = {:?}\n", input.display().to_string());
         BuildConfig::from_toml(&text, &input.display().to_string())
