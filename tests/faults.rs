@@ -14,7 +14,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::Duration;
-use support::{bin, synthetic_config};
+use support::{bin, synthetic_config, synthetic_labels_config};
 
 fn digests(dataset: &Path, table: &str) -> BTreeMap<(u64, u32), String> {
     let ds = Dataset::open(dataset).unwrap();
@@ -123,13 +123,7 @@ fn twenty_random_sigkills_during_a_build_then_a_final_run_equal_an_uninterrupted
 fn ten_random_sigkills_during_labels_then_a_final_run_equal_an_uninterrupted_run() {
     let dir = tempfile::tempdir().unwrap();
     let config = dir.path().join("l.toml");
-    std::fs::write(
-        &config,
-        "seed = 2\nsamples_per_window = 2\nshard_size = 1\n[source]\nkind = \"synthetic\"\nscenes = 1\n\
-         [source.synthetic]\nframes = 40\n[source.synthetic.intrinsics]\nfx = 292.5\nfy = 292.5\ncx = 160.0\ncy = 120.0\nwidth = 320\nheight = 240\n\
-         [window]\nframes = 8\nstride = 8\n[tsdf]\nvoxel_size_m = 0.02\ntruncation_m = 0.08\n",
-    )
-    .unwrap();
+    std::fs::write(&config, synthetic_labels_config(40, 320, 240)).unwrap();
     let reference_dir = dir.path().join("ref");
     let o = command("labels", &config, &reference_dir, &[]).output().unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));

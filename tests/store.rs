@@ -11,8 +11,39 @@ use std::collections::BTreeMap;
 use std::path::Path;
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
+use std::path::PathBuf;
+use std::sync::MutexGuard;
 use support::store::{Moto, Proxy, ENV};
-use support::{bin, python, synthetic_config};
+use support::{bin, python, synthetic_config, synthetic_labels_config};
+
+/// One test's S3 world: a moto server with one bucket and a temporary folder, under the lock of the
+/// process environment (the tests point the AWS variables at their own server).
+struct World {
+    moto: Moto,
+    dir: tempfile::TempDir,
+    _env: MutexGuard<'static, ()>,
+}
+
+impl World {
+    fn new(bucket: &str) -> World {
+        let _env = ENV.lock().unwrap_or_else(|e| e.into_inner());
+        let moto = Moto::start();
+        moto.set_env();
+        moto.create_bucket(bucket);
+        World { moto, dir: tempfile::tempdir().unwrap(), _env }
+    }
+
+    /// Writes `config` as a build config and builds it into a local folder: the config's path, the
+    /// folder and its content digests, the reference a build on the store must equal.
+    fn reference_build(&self, config: String) -> (PathBuf, PathBuf, BTreeMap<u64, String>) {
+        let path = self.dir.path().join("c.toml");
+        std::fs::write(&path, config).unwrap();
+        let local = self.dir.path().join("ref");
+        ok(build(&self.moto.endpoint(), &path, local.to_str().unwrap()).output().unwrap());
+        let reference = digests(local.to_str().unwrap());
+        (path, local, reference)
+    }
+}
 
 /// Content digests of the committed pairs of `dataset` (folder or URL; for a URL, the environment
 /// must point at its server).
@@ -65,19 +96,12 @@ fn assert_clean(endpoint: &str, bucket: &str, prefix: &str) {
 
 #[test]
 fn a_build_on_s3_equals_the_build_in_a_folder_and_queries_and_pyarrow_agree() {
-    let _env = ENV.lock().unwrap_or_else(|e| e.into_inner());
-    let moto = Moto::start();
-    moto.set_env();
-    moto.create_bucket("data");
-    let dir = tempfile::tempdir().unwrap();
-    let config = dir.path().join("c.toml");
-    std::fs::write(&config, synthetic_config(2, 12, 2, 1, 320, 240, 2)).unwrap();
-    let local = dir.path().join("local");
+    let w = World::new("data");
+    let moto = &w.moto;
+    let (config, local, reference) = w.reference_build(synthetic_config(2, 12, 2, 1, 320, 240, 2));
     let url = "s3://data/runs/demo";
-    ok(build(&moto.endpoint(), &config, local.to_str().unwrap()).output().unwrap());
     let summary = ok(build(&moto.endpoint(), &config, url).output().unwrap());
     assert!(summary.contains("6 committed now") && summary.contains("pointreggpt query s3://data/runs/demo"), "{summary}");
-    let reference = digests(local.to_str().unwrap());
     assert_eq!(reference.len(), 12);
     assert_eq!(digests(url), reference, "same rows, content hash for content hash");
     // Another config on the same prefix is refused, naming the URL and the key.
@@ -110,7 +134,7 @@ fn a_build_on_s3_equals_the_build_in_a_folder_and_queries_and_pyarrow_agree() {
         assert_eq!((v[0].as_str().unwrap(), v[2].as_u64().unwrap() as usize), (r.status.as_str(), r.source_points.len()));
     }
     // export and stats read the store too.
-    let out = dir.path().join("ply");
+    let out = w.dir.path().join("ply");
     let said = ok(run(&moto.endpoint(), &["export", url, "--format", "ply", "--out", out.to_str().unwrap(), "--limit", "2", "--no-progress"]).output().unwrap());
     assert!(said.contains("wrote 2 pairs"), "{said}");
     assert_clean(&moto.endpoint(), "data", "runs/demo");
@@ -125,16 +149,9 @@ fn manifest_counter(url: &str) -> impl Fn() -> usize {
 #[test]
 fn sigkills_during_an_s3_build_then_resume_give_the_same_dataset_and_repair_leaves_nothing() {
     use std::os::unix::process::ExitStatusExt;
-    let _env = ENV.lock().unwrap_or_else(|e| e.into_inner());
-    let moto = Moto::start();
-    moto.set_env();
-    moto.create_bucket("kills");
-    let dir = tempfile::tempdir().unwrap();
-    let config = dir.path().join("c.toml");
-    std::fs::write(&config, synthetic_config(2, 40, 2, 1, 320, 240, 2)).unwrap();
-    let local = dir.path().join("ref");
-    ok(build(&moto.endpoint(), &config, local.to_str().unwrap()).output().unwrap());
-    let reference = digests(local.to_str().unwrap());
+    let w = World::new("kills");
+    let moto = &w.moto;
+    let (config, _, reference) = w.reference_build(synthetic_config(2, 40, 2, 1, 320, 240, 2));
     let url = "s3://kills/ds";
     let manifest_objects = manifest_counter(url);
     let (total, mut log) = (20, Vec::new());
@@ -172,15 +189,9 @@ fn sigkills_during_an_s3_build_then_resume_give_the_same_dataset_and_repair_leav
 
 #[test]
 fn two_writers_racing_on_the_same_shards_leave_one_object_per_shard() {
-    let _env = ENV.lock().unwrap_or_else(|e| e.into_inner());
-    let moto = Moto::start();
-    moto.set_env();
-    moto.create_bucket("race");
-    let dir = tempfile::tempdir().unwrap();
-    let config = dir.path().join("c.toml");
-    std::fs::write(&config, synthetic_config(1, 16, 2, 1, 320, 240, 2)).unwrap();
-    let local = dir.path().join("ref");
-    ok(build(&moto.endpoint(), &config, local.to_str().unwrap()).output().unwrap());
+    let w = World::new("race");
+    let moto = &w.moto;
+    let (config, local, reference) = w.reference_build(synthetic_config(1, 16, 2, 1, 320, 240, 2));
     let url = "s3://race/ds";
     // Both processes own every shard (one worker each), so each shard is written twice.
     let a = build(&moto.endpoint(), &config, url).spawn().unwrap();
@@ -190,17 +201,17 @@ fn two_writers_racing_on_the_same_shards_leave_one_object_per_shard() {
     ok(oa);
     ok(ob);
     assert!(lost > 0, "no writer lost a race");
-    assert_eq!(digests(url), digests(local.to_str().unwrap()));
+    assert_eq!(digests(url), reference);
     assert_clean(&moto.endpoint(), "race", "ds");
 
     // Two workers splitting the shards (k mod 2) into one prefix, at the same time.
     let workers: Vec<_> = (0..2)
         .map(|i| build(&moto.endpoint(), &config, "s3://race/split").args(["--worker", &i.to_string(), "--workers", "2"]).spawn().unwrap())
         .collect();
-    for w in workers {
-        assert!(ok(w.wait_with_output().unwrap()).contains("2 committed now"));
+    for worker in workers {
+        assert!(ok(worker.wait_with_output().unwrap()).contains("2 committed now"));
     }
-    assert_eq!(digests("s3://race/split"), digests(local.to_str().unwrap()));
+    assert_eq!(digests("s3://race/split"), reference);
 
     // Eight threads committing one shard at once: one object, one entry, the same for everyone.
     let ds = Dataset::create_or_open("s3://race/threads", "seed = 1\n", "h1").unwrap();
@@ -226,12 +237,9 @@ fn two_writers_racing_on_the_same_shards_leave_one_object_per_shard() {
 
 #[test]
 fn bad_urls_fail_clearly_before_any_work() {
-    let _env = ENV.lock().unwrap_or_else(|e| e.into_inner());
-    let moto = Moto::start();
-    moto.set_env();
-    moto.create_bucket("present");
-    let dir = tempfile::tempdir().unwrap();
-    let config = dir.path().join("c.toml");
+    let w = World::new("present");
+    let moto = &w.moto;
+    let config = w.dir.path().join("c.toml");
     std::fs::write(&config, synthetic_config(1, 4, 2, 1, 160, 120, 2)).unwrap();
     let fails = |endpoint: &str, extra: &[(&str, &str)], out: &str, wants: &[&str]| {
         let t = Instant::now();
@@ -250,7 +258,7 @@ fn bad_urls_fail_clearly_before_any_work() {
     fails(&format!("http://127.0.0.1:{closed}"), &[], "s3://present/ds", &["s3://present/ds", "cannot reach the store"]);
     // A profile in the AWS files (no key, no endpoint in the environment): its endpoint_url can only come
     // from the config file, so the build reaching moto shows the files were read.
-    let (creds, conf) = (dir.path().join("credentials"), dir.path().join("config"));
+    let (creds, conf) = (w.dir.path().join("credentials"), w.dir.path().join("config"));
     std::fs::write(&creds, "[builder]\naws_access_key_id = testing\naws_secret_access_key = testing\n").unwrap();
     std::fs::write(&conf, format!("[profile builder]\nregion = us-east-1\nendpoint_url = {}\n", moto.endpoint())).unwrap();
     let o = build(&moto.endpoint(), &config, "s3://present/profile")
@@ -271,16 +279,9 @@ fn bad_urls_fail_clearly_before_any_work() {
 
 #[test]
 fn a_store_that_goes_away_mid_build_keeps_every_committed_shard_and_the_build_fails() {
-    let _env = ENV.lock().unwrap_or_else(|e| e.into_inner());
-    let moto = Moto::start();
-    moto.set_env();
-    moto.create_bucket("flaky");
-    let dir = tempfile::tempdir().unwrap();
-    let config = dir.path().join("c.toml");
-    std::fs::write(&config, synthetic_config(2, 40, 2, 1, 320, 240, 2)).unwrap();
-    let local = dir.path().join("ref");
-    ok(build(&moto.endpoint(), &config, local.to_str().unwrap()).output().unwrap());
-    let reference = digests(local.to_str().unwrap());
+    let w = World::new("flaky");
+    let moto = &w.moto;
+    let (config, _, reference) = w.reference_build(synthetic_config(2, 40, 2, 1, 320, 240, 2));
     let url = "s3://flaky/ds";
     let proxy = Proxy::start(moto.port);
     let manifest_objects = manifest_counter(url);
@@ -307,10 +308,8 @@ fn a_store_that_goes_away_mid_build_keeps_every_committed_shard_and_the_build_fa
 #[test]
 fn large_shards_go_up_in_parts_and_abandoned_uploads_are_aborted_by_repair() {
     use pointreggpt::shards::store::object::ObjectDatasetStore;
-    let _env = ENV.lock().unwrap_or_else(|e| e.into_inner());
-    let moto = Moto::start();
-    moto.set_env();
-    moto.create_bucket("big");
+    let w = World::new("big");
+    let moto = &w.moto;
     let url = "s3://big/ds";
     let ds = Dataset::create_or_open(url, "seed = 1\n", "h1").unwrap();
     // 40 rows of two 40k-point clouds of noise: ~19 MB of Parquet, four parts of 5 MiB.
@@ -362,20 +361,11 @@ fn large_shards_go_up_in_parts_and_abandoned_uploads_are_aborted_by_repair() {
 #[test]
 fn labels_on_s3_equal_labels_in_a_folder_and_training_reads_them() {
     use pointreggpt::training::correction::data::LabelSet;
-    let _env = ENV.lock().unwrap_or_else(|e| e.into_inner());
-    let moto = Moto::start();
-    moto.set_env();
-    moto.create_bucket("labels");
-    let dir = tempfile::tempdir().unwrap();
-    let config = dir.path().join("l.toml");
-    std::fs::write(
-        &config,
-        "seed = 2\nsamples_per_window = 2\nshard_size = 1\n[source]\nkind = \"synthetic\"\nscenes = 1\n\
-         [source.synthetic]\nframes = 24\n[source.synthetic.intrinsics]\nfx = 146.25\nfy = 146.25\ncx = 80.0\ncy = 60.0\nwidth = 160\nheight = 120\n\
-         [window]\nframes = 8\nstride = 8\n[tsdf]\nvoxel_size_m = 0.02\ntruncation_m = 0.08\n",
-    )
-    .unwrap();
-    let local = dir.path().join("labels");
+    let w = World::new("labels");
+    let moto = &w.moto;
+    let config = w.dir.path().join("l.toml");
+    std::fs::write(&config, synthetic_labels_config(24, 160, 120)).unwrap();
+    let local = w.dir.path().join("labels");
     let labels = |out: &str| run(&moto.endpoint(), &["labels", config.to_str().unwrap(), "--out", out, "--no-progress"]).output().unwrap();
     ok(labels(local.to_str().unwrap()));
     ok(labels("s3://labels/l"));

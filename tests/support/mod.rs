@@ -52,3 +52,16 @@ pub fn synthetic_config(scenes: u32, frames: usize, every: usize, samples: u32, 
         cy = height as f64 / 2.0
     )
 }
+
+/// A small synthetic labels config: one scene of `frames` frames at `width`×`height` (fx scaled from 585
+/// at 640), windows of 8 frames with stride 8, two samples per window, one window per shard.
+pub fn synthetic_labels_config(frames: usize, width: u32, height: u32) -> String {
+    let f = 585.0 * width as f64 / 640.0;
+    format!(
+        "seed = 2\nsamples_per_window = 2\nshard_size = 1\n[source]\nkind = \"synthetic\"\nscenes = 1\n\
+         [source.synthetic]\nframes = {frames}\n[source.synthetic.intrinsics]\nfx = {f}\nfy = {f}\ncx = {cx}\ncy = {cy}\nwidth = {width}\nheight = {height}\n\
+         [window]\nframes = 8\nstride = 8\n[tsdf]\nvoxel_size_m = 0.02\ntruncation_m = 0.08\n",
+        cx = width as f64 / 2.0,
+        cy = height as f64 / 2.0
+    )
+}
