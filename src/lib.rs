@@ -5,6 +5,7 @@ pub mod atomic;
 pub mod cli;
 pub mod commands;
 pub mod correction;
+pub mod descriptor;
 pub mod diffusion;
 pub mod error;
 pub mod export;

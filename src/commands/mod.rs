@@ -12,4 +12,5 @@ pub mod query;
 pub mod synth;
 pub mod verify;
 pub mod train;
+pub mod train_descriptor;
 pub mod eval;

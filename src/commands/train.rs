@@ -1,5 +1,5 @@
-//! `pointreggpt train correction|diffusion`: train the depth-correction U-Net on label shards, or the
-//! diffusion denoiser on depth frames.
+//! `pointreggpt train correction|diffusion|descriptor`: train the depth-correction U-Net on label shards,
+//! the diffusion denoiser on depth frames, or (in [`super::train_descriptor`]) the registration descriptor.
 
 use crate::error::{Error, Result};
 use crate::training::correction::data::LabelSet;
@@ -20,6 +20,8 @@ pub enum TrainWhat {
     Correction(TrainCorrectionArgs),
     /// Train the diffusion denoiser (reference §5) on single depth frames of any source.
     Diffusion(TrainDiffusionArgs),
+    /// Train the patch descriptor for registration on pair datasets made by `pointreggpt build`.
+    Descriptor(super::train_descriptor::TrainDescriptorArgs),
 }
 
 #[derive(Debug, clap::Args)]
@@ -184,6 +186,7 @@ pub fn run(args: &TrainArgs, out: &mut dyn Write) -> Result<()> {
     match &args.what {
         TrainWhat::Correction(a) => run_correction(a, out),
         TrainWhat::Diffusion(a) => run_diffusion(a, out),
+        TrainWhat::Descriptor(a) => super::train_descriptor::run(a, out),
     }
 }
 

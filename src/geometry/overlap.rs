@@ -4,13 +4,16 @@ use super::{transform_points, Point};
 use nalgebra::Isometry3;
 use rayon::prelude::*;
 
-/// A uniform-grid index over a point cloud that answers "is there a point within `radius` of q?".
+/// A uniform-grid index over a point cloud that answers "is there a point within `radius` of q?",
+/// "which points are?" and "which one is nearest?".
 ///
 /// The grid spans the cloud's bounding box with cubic cells of edge `max(radius, ...)`, capped at
 /// about 8 cells per point, so a query checks at most the 3×3×3 cells around its own. Distances are
 /// compared as `|q − p|² < radius²` in f32 (strict, as Open3D's radius search).
 pub struct RadiusIndex {
     points: Vec<Point>,
+    /// `order[i]`: the index in the input cloud of `points[i]` (the points are stored by cell).
+    order: Vec<u32>,
     starts: Vec<u32>,
     origin: [f32; 3],
     dims: [usize; 3],
@@ -23,7 +26,7 @@ impl RadiusIndex {
     pub fn new(points: &[Point], radius: f32) -> Self {
         assert!(radius.is_finite() && radius > 0.0, "radius must be positive, got {radius}");
         if points.is_empty() {
-            return RadiusIndex { points: Vec::new(), starts: vec![0, 0], origin: [0.0; 3], dims: [1, 1, 1], inv_cell: 1.0, radius2: radius * radius };
+            return RadiusIndex { points: Vec::new(), order: Vec::new(), starts: vec![0, 0], origin: [0.0; 3], dims: [1, 1, 1], inv_cell: 1.0, radius2: radius * radius };
         }
         let mut lo = [f32::MAX; 3];
         let mut hi = [f32::MIN; 3];
@@ -63,43 +66,77 @@ impl RadiusIndex {
         }
         let mut fill = starts.clone();
         let mut sorted = vec![Point::origin(); points.len()];
-        for (p, &c) in points.iter().zip(&ids) {
+        let mut order = vec![0u32; points.len()];
+        for (i, (p, &c)) in points.iter().zip(&ids).enumerate() {
             sorted[fill[c as usize] as usize] = *p;
+            order[fill[c as usize] as usize] = i as u32;
             fill[c as usize] += 1;
         }
-        RadiusIndex { points: sorted, starts, origin: lo, dims, inv_cell, radius2: radius * radius }
+        RadiusIndex { points: sorted, order, starts, origin: lo, dims, inv_cell, radius2: radius * radius }
     }
 
-    /// Whether some indexed point lies strictly within the radius of `q`.
-    pub fn has_neighbor(&self, q: &Point) -> bool {
+    /// Calls `visit(index in the input cloud, squared distance)` for every indexed point strictly within
+    /// the radius of `q`, in storage order, until `visit` returns false.
+    fn visit_within(&self, q: &Point, mut visit: impl FnMut(usize, f32) -> bool) {
         if self.points.is_empty() {
-            return false;
+            return;
         }
         let mut range = [(0usize, 0usize); 3];
         for a in 0..3 {
             let g = ((q[a] - self.origin[a]) * self.inv_cell).floor();
             if !(g >= -1.0 && g <= self.dims[a] as f32) {
-                return false; // more than one cell outside the box: nothing within the radius
+                return; // more than one cell outside the box: nothing within the radius
             }
             let g = g as i64;
             range[a] = ((g - 1).max(0) as usize, ((g + 1).min(self.dims[a] as i64 - 1)) as usize);
             if range[a].0 > range[a].1 {
-                return false;
+                return;
             }
         }
         for gx in range[0].0..=range[0].1 {
             for gy in range[1].0..=range[1].1 {
                 let base = (gx * self.dims[1] + gy) * self.dims[2];
                 let (s, e) = (self.starts[base + range[2].0] as usize, self.starts[base + range[2].1 + 1] as usize);
-                for p in &self.points[s..e] {
+                for (p, &i) in self.points[s..e].iter().zip(&self.order[s..e]) {
                     let d = (p.x - q.x) * (p.x - q.x) + (p.y - q.y) * (p.y - q.y) + (p.z - q.z) * (p.z - q.z);
-                    if d < self.radius2 {
-                        return true;
+                    if d < self.radius2 && !visit(i as usize, d) {
+                        return;
                     }
                 }
             }
         }
-        false
+    }
+
+    /// Whether some indexed point lies strictly within the radius of `q`.
+    pub fn has_neighbor(&self, q: &Point) -> bool {
+        let mut found = false;
+        self.visit_within(q, |_, _| {
+            found = true;
+            false
+        });
+        found
+    }
+
+    /// The input-cloud indices of the points strictly within the radius of `q` (in no particular order).
+    pub fn within(&self, q: &Point, out: &mut Vec<usize>) {
+        out.clear();
+        self.visit_within(q, |i, _| {
+            out.push(i);
+            true
+        });
+    }
+
+    /// The input-cloud index and distance of the point nearest to `q` among those strictly within the
+    /// radius (ties: the lower index).
+    pub fn nearest(&self, q: &Point) -> Option<(usize, f32)> {
+        let mut best: Option<(usize, f32)> = None;
+        self.visit_within(q, |i, d| {
+            if best.is_none_or(|(j, e)| d < e || (d == e && i < j)) {
+                best = Some((i, d));
+            }
+            true
+        });
+        best.map(|(i, d)| (i, d.sqrt()))
     }
 
     /// How many of `queries` have a neighbour within the radius.
@@ -146,6 +183,26 @@ mod tests {
         (0..n)
             .map(|_| Point::new((r.uniform_range(-1.0, 1.0) + offset) as f32, r.uniform_range(-1.0, 1.0) as f32, r.uniform_range(1.0, 1.2) as f32))
             .collect()
+    }
+
+    #[test]
+    fn within_and_nearest_equal_brute_force() {
+        let mut r = Rng::new(4);
+        let points = cloud(&mut r, 3000, 0.0);
+        let queries = cloud(&mut r, 300, 0.3);
+        let d2 = |p: &Point, q: &Point| (p.x - q.x) * (p.x - q.x) + (p.y - q.y) * (p.y - q.y) + (p.z - q.z) * (p.z - q.z);
+        for radius in [0.03f32, 0.1, 0.4] {
+            let index = RadiusIndex::new(&points, radius);
+            let mut got = Vec::new();
+            for q in &queries {
+                index.within(q, &mut got);
+                got.sort_unstable();
+                let want: Vec<usize> = (0..points.len()).filter(|&i| d2(&points[i], q) < radius * radius).collect();
+                assert_eq!(got, want);
+                let nearest = want.iter().copied().min_by(|&a, &b| d2(&points[a], q).total_cmp(&d2(&points[b], q)).then(a.cmp(&b)));
+                assert_eq!(index.nearest(q).map(|(i, _)| i), nearest);
+            }
+        }
     }
 
     #[test]

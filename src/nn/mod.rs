@@ -8,7 +8,7 @@
 //!   ResnetBlock with optional FiLM), [`attention`] (linear and full attention, pre-norm residual);
 //! - models: [`unet`] (the skeleton of reference §4.1 / §5.1 with its presets), [`augment`]
 //!   (DepthAugment), [`correction`] (`CorrectionNet`), [`denoiser`] (the diffusion U-Net with time and
-//!   intrinsics FiLM conditioning);
+//!   intrinsics FiLM conditioning), [`patch_net`] (the 3D ConvNet of the learned registration descriptor);
 //! - [`space`]: metric depth ↔ network values (`z/10`, `2·z/10 − 1`), the one place for those formulas;
 //! - I/O: [`checkpoint`] (safetensors with the config in the header metadata; the authors' key layout),
 //!   [`model_path`].
@@ -25,6 +25,7 @@ pub mod denoiser;
 pub mod init;
 pub mod model_path;
 pub mod norm;
+pub mod patch_net;
 pub mod resnet;
 pub mod space;
 pub mod unet;

@@ -6,5 +6,6 @@
 //! and is imported by none of them.
 
 pub mod correction;
+pub mod descriptor;
 pub mod diffusion;
 pub mod eval_inpaint;
