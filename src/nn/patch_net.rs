@@ -21,7 +21,7 @@ pub struct PatchNetConfig {
 
 impl Default for PatchNetConfig {
     fn default() -> Self {
-        PatchNetConfig { voxels: 16, width: 16, dim: 32 }
+        PatchNetConfig { voxels: 16, width: 8, dim: 32 }
     }
 }
 
