@@ -15,6 +15,7 @@ pub mod nn;
 pub mod pipeline;
 pub mod ply;
 pub mod query;
+pub mod registration;
 pub mod preview;
 pub mod rng;
 pub mod runtime;

@@ -13,3 +13,5 @@ pub mod synth;
 pub mod verify;
 pub mod train;
 pub mod eval;
+pub mod eval_registration;
+pub mod fragments;
