@@ -44,7 +44,7 @@ pub struct FragmentsArgs {
     #[arg(long, default_value_t = 5)]
     pub every: usize,
     /// Single frames: gaps (in frames) between the two frames of a pair, comma-separated.
-    #[arg(long, value_delimiter = ',', default_value = "5,10,15,20,30,40,50")]
+    #[arg(long, value_delimiter = ',', default_value = "5,10,20,30,40,50,60,70,80,90")]
     pub gaps: Vec<usize>,
     /// Output benchmark folder.
     #[arg(long)]
