@@ -17,7 +17,6 @@ use pointreggpt::registration::matching::{match_features, Features};
 use pointreggpt::registration::metrics::rre_rte;
 use pointreggpt::registration::normals::estimate_normals;
 use pointreggpt::registration::ransac::{ransac, RansacConfig};
-use pointreggpt::registration::KdTree;
 use pointreggpt::rng::Rng;
 use pointreggpt::sources::{open_sequences, Layout};
 use std::path::{Path, PathBuf};
@@ -72,10 +71,9 @@ fn main() {
     let (mut normals, mut feats) = (Vec::new(), Vec::new());
     let (mut n_ms, mut f_ms) = (0.0, 0.0);
     for c in &clouds {
-        let (ms, n) = time(REPS, || estimate_normals(c, &KdTree::from_points(c), 0.05, 30));
+        let (ms, n) = time(REPS, || estimate_normals(c, 0.05, 30));
         n_ms += ms;
-        let tree = KdTree::from_points(c);
-        let (ms2, f) = time(REPS, || fpfh(c, &n, &tree, 0.125, 100));
+        let (ms2, f) = time(REPS, || fpfh(c, &n, 0.125, 100));
         f_ms += ms2;
         normals.push(n);
         feats.push(Features { dim: 33, data: f });

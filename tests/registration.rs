@@ -12,7 +12,6 @@ use pointreggpt::registration::benchmark::{find_benchmarks, read_gt_info, read_g
 use pointreggpt::registration::fpfh::fpfh;
 use pointreggpt::registration::metrics::registration_error;
 use pointreggpt::registration::normals::estimate_normals;
-use pointreggpt::registration::KdTree;
 use pointreggpt::sources::{open_sequences, Layout};
 use pointreggpt::stages::ingest::WorkingConfig;
 use pointreggpt::stages::voxelize::VoxelizeConfig;
@@ -51,8 +50,7 @@ fn normals_and_fpfh_equal_open3d_on_a_real_frame() {
     let seq = open_sequences(&real.join("7scenes-redkitchen"), Layout::Auto).unwrap().remove(0);
     let points = single_frame_cloud(&seq, 120, &WorkingConfig::default(), &VoxelizeConfig::default()).unwrap().points;
     assert!(points.len() > 2000, "{} points", points.len());
-    let tree = KdTree::from_points(&points);
-    let normals = estimate_normals(&points, &tree, 0.05, 30);
+    let normals = estimate_normals(&points, 0.05, 30);
     let dir = tempfile::tempdir().unwrap();
     write_f32(&dir.path().join("points.f32"), points.iter().flat_map(|p| [p.x, p.y, p.z]));
     write_f32(&dir.path().join("normals_ours.f32"), normals.iter().flat_map(|n| [n.x, n.y, n.z]));
@@ -70,7 +68,7 @@ fn normals_and_fpfh_equal_open3d_on_a_real_frame() {
     println!("normals: {} points, worst angle {worst:.4} deg, {over} above 1 deg", points.len());
     assert_eq!(over, 0, "normals more than 1 degree from Open3D's (worst {worst} deg)");
 
-    let ours = fpfh(&points, &normals, &tree, 0.125, 100);
+    let ours = fpfh(&points, &normals, 0.125, 100);
     let theirs = read_f32(&dir.path().join("fpfh_o3d.f32"));
     assert_eq!(ours.len(), theirs.len());
     let worst = ours.iter().zip(&theirs).map(|(a, b)| (a - b).abs() / b.abs().max(1.0)).fold(0.0f32, f32::max);

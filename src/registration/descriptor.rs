@@ -2,7 +2,6 @@
 //! several radii (`fpfh`, `fpfh:0.1`, `fpfh:0.075+0.125+0.2`); a learned descriptor joins as a variant.
 
 use super::fpfh::fpfh_multi;
-use super::kdtree::KdTree;
 use super::matching::Features;
 use super::normals::estimate_normals;
 use crate::error::{Error, Result};
@@ -55,9 +54,8 @@ impl Descriptor {
     pub fn describe(&self, points: &[Point]) -> Features {
         match self {
             Descriptor::Fpfh { radii } => {
-                let tree = KdTree::from_points(points);
-                let normals = estimate_normals(points, &tree, NORMAL_RADIUS, NORMAL_MAX_NN);
-                Features { dim: 33 * radii.len(), data: fpfh_multi(points, &normals, &tree, radii, FPFH_MAX_NN) }
+                let normals = estimate_normals(points, NORMAL_RADIUS, NORMAL_MAX_NN);
+                Features { dim: 33 * radii.len(), data: fpfh_multi(points, &normals, radii, FPFH_MAX_NN) }
             }
         }
     }

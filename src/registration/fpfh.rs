@@ -3,7 +3,7 @@
 //! within the radius), SPFH of each point over its neighbours, then FPFH = SPFH + the neighbours' SPFH
 //! weighted by 1/d² and normalised to 100 per angle. Several radii concatenate (multi-scale).
 
-use super::kdtree::KdTree;
+use super::grid::RadiusGrid;
 use crate::geometry::Point;
 use nalgebra::Vector3;
 use rayon::prelude::*;
@@ -46,16 +46,17 @@ fn bin(x: f64) -> usize {
 }
 
 /// FPFH of every point at one radius, rows of [`FPFH_DIM`] values (f32; computed in f64).
-pub fn fpfh(points: &[Point], normals: &[Vector3<f32>], tree: &KdTree, radius: f32, max_nn: usize) -> Vec<f32> {
+pub fn fpfh(points: &[Point], normals: &[Vector3<f32>], radius: f32, max_nn: usize) -> Vec<f32> {
     assert_eq!(points.len(), normals.len(), "one normal per point");
     let p64 = |i: usize| points[i].coords.cast::<f64>();
     let n64 = |i: usize| normals[i].cast::<f64>();
     // Neighbourhoods once: each point's list (sorted by distance, the point itself first).
+    let grid = RadiusGrid::new(points, radius);
     let neighbours: Vec<Vec<(u32, f32)>> = points
         .par_iter()
         .map(|p| {
             let mut nb = Vec::new();
-            tree.hybrid(&[p.x, p.y, p.z], radius, max_nn, &mut nb);
+            grid.hybrid(p, max_nn, &mut nb);
             nb
         })
         .collect();
@@ -109,8 +110,8 @@ pub fn fpfh(points: &[Point], normals: &[Vector3<f32>], tree: &KdTree, radius: f
 }
 
 /// FPFH at each of `radii`, concatenated per point (`33 · radii.len()` values a row).
-pub fn fpfh_multi(points: &[Point], normals: &[Vector3<f32>], tree: &KdTree, radii: &[f32], max_nn: usize) -> Vec<f32> {
-    let per: Vec<Vec<f32>> = radii.iter().map(|&r| fpfh(points, normals, tree, r, max_nn)).collect();
+pub fn fpfh_multi(points: &[Point], normals: &[Vector3<f32>], radii: &[f32], max_nn: usize) -> Vec<f32> {
+    let per: Vec<Vec<f32>> = radii.iter().map(|&r| fpfh(points, normals, r, max_nn)).collect();
     let dim = FPFH_DIM * radii.len();
     let mut out = vec![0.0f32; points.len() * dim];
     for (k, f) in per.iter().enumerate() {
@@ -129,9 +130,8 @@ mod tests {
     fn each_angle_histogram_sums_to_200_or_0() {
         // SPFH sums to 100 per angle and the weighted neighbour part is normalised to 100.
         let pts: Vec<Point> = (0..300).map(|i| { let a = i as f32 * 0.37; Point::new(a.cos() * (1.0 + 0.001 * i as f32), a.sin(), 2.0 + 0.003 * i as f32) }).collect();
-        let tree = KdTree::from_points(&pts);
-        let normals = super::super::normals::estimate_normals(&pts, &tree, 0.3, 30);
-        let f = fpfh(&pts, &normals, &tree, 0.3, 50);
+        let normals = super::super::normals::estimate_normals(&pts, 0.3, 30);
+        let f = fpfh(&pts, &normals, 0.3, 50);
         for row in f.chunks(FPFH_DIM) {
             for a in 0..3 {
                 let s: f32 = row[a * BINS..(a + 1) * BINS].iter().sum();

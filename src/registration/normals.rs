@@ -1,7 +1,7 @@
 //! Surface normals by PCA over a neighbourhood (Open3D's `estimate_normals` with a hybrid search),
 //! oriented towards the camera at the origin of the cloud's frame.
 
-use super::kdtree::KdTree;
+use super::grid::RadiusGrid;
 use crate::geometry::Point;
 use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
@@ -10,11 +10,12 @@ use rayon::prelude::*;
 /// `max_nn` nearest points within `radius` (the point itself included), flipped to face the camera at
 /// the origin (`n·(0 − p) ≥ 0`). A point with fewer than 3 neighbours gets (0, 0, 1) before
 /// orientation, as Open3D does.
-pub fn estimate_normals(points: &[Point], tree: &KdTree, radius: f32, max_nn: usize) -> Vec<Vector3<f32>> {
+pub fn estimate_normals(points: &[Point], radius: f32, max_nn: usize) -> Vec<Vector3<f32>> {
+    let grid = RadiusGrid::new(points, radius);
     points
         .par_iter()
         .map_init(Vec::new, |nb, p| {
-            tree.hybrid(&[p.x, p.y, p.z], radius, max_nn, nb);
+            grid.hybrid(p, max_nn, nb);
             let n = if nb.len() >= 3 { pca_normal(points, nb) } else { Vector3::new(0.0, 0.0, 1.0) };
             if n.dot(&-p.coords.cast::<f64>()) < 0.0 {
                 (-n).cast::<f32>()
@@ -57,9 +58,8 @@ mod tests {
         // The plane z = 2 − 0.5·x seen from the origin: normal ±(0.5, 0, 1)/|·|, facing −z.
         let pts: Vec<Point> =
             (0..400).map(|i| { let (x, y) = ((i % 20) as f32 * 0.01, (i / 20) as f32 * 0.01); Point::new(x, y, 2.0 - 0.5 * x) }).collect();
-        let tree = KdTree::from_points(&pts);
         let want = -Vector3::new(0.5f32, 0.0, 1.0).normalize();
-        for n in estimate_normals(&pts, &tree, 0.05, 30) {
+        for n in estimate_normals(&pts, 0.05, 30) {
             assert!((n - want).norm() < 1e-4, "{n:?}");
         }
     }
