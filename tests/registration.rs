@@ -225,7 +225,8 @@ fn ransac_fpfh_registration_recall_matches_open3d_on_real_single_frames() {
     let bench = dir.path().join("bench");
     let seq = real.join("7scenes-redkitchen");
     let b = bench.to_str().unwrap();
-    run(&["fragments", seq.to_str().unwrap(), "--single-frames", "--first", "0", "--frames", "120", "--every", "10", "--gaps", "10,20,30", "--out", b, "--quiet"]);
+    // Gaps of 40-100 frames: overlaps from 20 to 80 %, so RR is off its ceiling (about 80 %) and can disagree.
+    run(&["fragments", seq.to_str().unwrap(), "--single-frames", "--first", "0", "--frames", "200", "--every", "15", "--gaps", "40,70,100", "--out", b, "--quiet"]);
     let t0 = std::time::Instant::now();
     let csv = run(&["eval", "registration", b, "--samples", "5000", "--csv", "--quiet"]);
     let ours_s = t0.elapsed().as_secs_f64();
