@@ -7,6 +7,8 @@
 
 use super::benchmark::{BenchPair, Benchmark};
 use super::descriptor::Descriptor;
+use super::icp::icp_point_to_point;
+use super::kdtree::KdTree;
 use super::matching::{match_features, Features};
 use super::metrics::{inlier_ratio, registration_error, rre_rte, RR_ERROR};
 use super::ransac::{ransac, RansacConfig};
@@ -28,12 +30,15 @@ pub struct EvalConfig {
     pub mutual: bool,
     /// RANSAC settings (its seed is replaced per pair).
     pub ransac: RansacConfig,
+    /// Point-to-point ICP iterations refining RANSAC's pose on the whole downsampled clouds (0: none),
+    /// pairing points closer than the RANSAC distance.
+    pub icp_iterations: usize,
     pub seed: u64,
 }
 
 impl Default for EvalConfig {
     fn default() -> Self {
-        EvalConfig { voxel: 0.025, samples: vec![5000, 1000, 250], mutual: false, ransac: RansacConfig::default(), seed: 0 }
+        EvalConfig { voxel: 0.025, samples: vec![5000, 1000, 250], mutual: false, ransac: RansacConfig::default(), icp_iterations: 0, seed: 0 }
     }
 }
 
@@ -56,10 +61,11 @@ pub struct PairScore {
     pub rte_m: f64,
 }
 
-/// A cloud, downsampled, with each descriptor's rows.
+/// A cloud, downsampled, with each descriptor's rows and (for ICP) its k-d tree.
 struct Described {
     points: Vec<Point>,
     features: Vec<Features>,
+    tree: KdTree,
 }
 
 /// `k` distinct indices below `n` (all of them, in order, when `k ≥ n`), drawn by a partial Fisher–Yates.
@@ -86,7 +92,8 @@ pub fn evaluate(bench: &Benchmark, descriptors: &[Descriptor], config: &EvalConf
         }
         let points = voxel_downsample(&crate::ply::read_ply(path)?, config.voxel);
         let features = descriptors.iter().map(|d| d.describe(&points)).collect();
-        let d = Arc::new(Described { points, features });
+        let tree = KdTree::from_points(if config.icp_iterations > 0 { &points } else { &[] });
+        let d = Arc::new(Described { points, features, tree });
         cache.insert(path.clone(), d.clone());
         Ok(d)
     };
@@ -117,8 +124,12 @@ fn score_pair(benchmark: &str, pair: &BenchPair, source: &Described, target: &De
     let rc = RansacConfig { seed: rng.fork(2).next_u64(), ..config.ransac.clone() };
     let (error, rre, rte) = match ransac(&sp, &tp, &corr, &rc) {
         Some(r) => {
-            let (rre, rte) = rre_rte(&pair.t_i_from_j, &r.t_target_from_source);
-            (registration_error(&pair.t_i_from_j, &r.t_target_from_source, &pair.info), rre, rte)
+            let mut t = r.t_target_from_source;
+            if config.icp_iterations > 0 {
+                t = icp_point_to_point(&source.points, &target.tree, &target.points, &t, config.ransac.distance, config.icp_iterations);
+            }
+            let (rre, rte) = rre_rte(&pair.t_i_from_j, &t);
+            (registration_error(&pair.t_i_from_j, &t, &pair.info), rre, rte)
         }
         None => (f64::INFINITY, f64::NAN, f64::NAN),
     };
