@@ -10,14 +10,16 @@ use std::io::Write;
 use std::path::PathBuf;
 
 #[derive(Debug, clap::Args)]
-#[command(after_help = "Per pair (source = fragment j, target = fragment i of gt.log): both clouds are voxel-downsampled \
+#[command(
+    after_help = "Per pair (source = fragment j, target = fragment i of gt.log): both clouds are voxel-downsampled \
 (--voxel), described, and N points are sampled from each (for every N of --samples; the same points for every descriptor); \
 each sampled source point is matched to its nearest target point in descriptor space (--mutual: mutual nearest only). \
 IR: fraction of matches closer than 10 cm under the ground truth; FMR: fraction of pairs with IR above 5 %; RR: RANSAC \
 (3-point samples, edge-length check 0.9, --ransac-distance, --ransac-iterations, confidence 0.999) registers a pair when \
 the official error x'.Info.x / Info00 of inv(T_gt).T_est (x = [t, q_xyz]) is at most 0.2^2; 3DMatch skips consecutive \
 fragments as the official protocol does. RRE (degrees) and RTE (metres) are means over registered pairs. --icp refines each RANSAC pose by point-to-point ICP. Every draw is \
-seeded from --seed and the pair, so the same seed gives the same table on any thread count.")]
+seeded from --seed and the pair, so the same seed gives the same table on any thread count."
+)]
 pub struct EvalRegistrationArgs {
     /// Benchmark folder: `pointreggpt fragments` output, GeoTransformer's metadata/benchmarks layout, or the
     /// official 3DMatch download (<scene>/cloud_bin_k.ply beside <scene>-evaluation/gt.log, gt.info).
@@ -73,13 +75,25 @@ pub fn run(args: &EvalRegistrationArgs, out: &mut dyn Write) -> Result<()> {
     if let Some(c) = &args.compare {
         descriptors.push(Descriptor::parse(c, "--compare")?);
     }
-    let mut config = EvalConfig { voxel: args.voxel, samples: args.samples.clone(), mutual: args.mutual, seed: args.seed, ..Default::default() };
+    let mut config = EvalConfig {
+        voxel: args.voxel,
+        samples: args.samples.clone(),
+        mutual: args.mutual,
+        seed: args.seed,
+        ..Default::default()
+    };
     config.ransac.distance = args.ransac_distance;
     config.ransac.max_iterations = args.ransac_iterations;
     config.icp_iterations = args.icp;
-    let benches: Vec<_> = find_benchmarks(&args.bench)?.into_iter().filter(|b| args.only.is_empty() || args.only.contains(&b.name)).collect();
+    let benches: Vec<_> = find_benchmarks(&args.bench)?
+        .into_iter()
+        .filter(|b| args.only.is_empty() || args.only.contains(&b.name))
+        .collect();
     if benches.is_empty() {
-        return Err(Error::config("--only", format!("no benchmark of {} is named {}", args.bench.display(), args.only.join(", "))));
+        return Err(Error::config(
+            "--only",
+            format!("no benchmark of {} is named {}", args.bench.display(), args.only.join(", ")),
+        ));
     }
     let total = benches.iter().map(|b| b.pairs.len() as u64).sum();
     let pb = bar(total, !args.quiet, "pairs");
@@ -94,12 +108,15 @@ pub fn run(args: &EvalRegistrationArgs, out: &mut dyn Write) -> Result<()> {
     for (d, s) in descriptors.iter().zip(&scores) {
         table.extend(rows(&d.name(), s));
     }
-    table.sort_by(|a, b| benches.iter().position(|x| x.name == a.benchmark).cmp(&benches.iter().position(|x| x.name == b.benchmark)));
+    table.sort_by(|a, b| {
+        benches.iter().position(|x| x.name == a.benchmark).cmp(&benches.iter().position(|x| x.name == b.benchmark))
+    });
     let text = if args.csv { format_csv(&table) } else { format_table(&table) };
     write!(out, "{text}").map_err(w)?;
     if descriptors.len() == 2 {
         let paired = paired_ir(&scores[0], &scores[1]);
-        write!(out, "{}", format_paired(&descriptors[0].name(), &descriptors[1].name(), &paired, args.csv)).map_err(w)?;
+        write!(out, "{}", format_paired(&descriptors[0].name(), &descriptors[1].name(), &paired, args.csv))
+            .map_err(w)?;
     }
     Ok(())
 }

@@ -3,7 +3,9 @@
 
 use crate::error::{Error, Result};
 use crate::ply;
-use crate::registration::benchmark::make::{fuse_fragment, pair_truths, single_frame_cloud, write_benchmark, Cloud, LO_MATCH_MAX, SINGLE_FRAME_MAX_OVERLAP};
+use crate::registration::benchmark::make::{
+    fuse_fragment, pair_truths, single_frame_cloud, write_benchmark, Cloud, LO_MATCH_MAX, SINGLE_FRAME_MAX_OVERLAP,
+};
 use crate::runtime::progress::bar;
 use crate::sources::{open_sequences, Layout};
 use crate::stages::ingest::WorkingConfig;
@@ -13,14 +15,16 @@ use std::io::Write;
 use std::path::PathBuf;
 
 #[derive(Debug, clap::Args)]
-#[command(after_help = "Fragments (default): fragment k fuses frames PER*k .. PER*k+PER-1 (TSDF, 6 mm voxels, 3 cm truncation, the \
+#[command(
+    after_help = "Fragments (default): fragment k fuses frames PER*k .. PER*k+PER-1 (TSDF, 6 mm voxels, 3 cm truncation, the \
 3DMatch settings) in the camera of frame PER*k and is written as <out>/<scene>/cloud_bin_k.ply. Every pair i < j whose overlap \
 (the larger of the two clouds' fractions of points with a neighbour within 3.75 cm under the ground truth, on 2.5 cm voxels) is \
 above 30 % goes to metadata/benchmarks/3DMatch/<scene>/, from 10 to 30 % to 3DLoMatch/: gt.log (`i j n` and the 4x4 mapping \
 fragment j into fragment i), gt.info (the 6x6 information matrix of j's overlapping points) and gt_overlap.log.\n\n\
 --single-frames: frame f and frame f+g for every EVERY-th frame f and every gap g of --gaps, each cloud made as a build makes it \
 (256x256 working resolution, depth range, crop box, 2.5 cm voxels), written as <out>/<scene>-frames/cloud_bin_<frame>.ply; pairs \
-with overlap from 10 to 90 % go to the benchmarks single-frame (above 30 %) and single-frame-lo (10-30 %).")]
+with overlap from 10 to 90 % go to the benchmarks single-frame (above 30 %) and single-frame-lo (10-30 %)."
+)]
 pub struct FragmentsArgs {
     /// Sequence folder (3DMatch / 7-Scenes / SUN3D, TUM or ScanNet layout; frames need poses). Every
     /// sequence found becomes a scene.
@@ -60,17 +64,30 @@ pub fn run(args: &FragmentsArgs, out: &mut dyn Write) -> Result<()> {
         return Err(Error::config("--frames-per-fragment/--every/--gaps", "must be at least 1"));
     }
     if !args.single_frames && args.first % per != 0 {
-        return Err(Error::config("--first", format!("{} is not a multiple of --frames-per-fragment {per}: fragment numbers would not be the official ones", args.first)));
+        return Err(Error::config(
+            "--first",
+            format!(
+                "{} is not a multiple of --frames-per-fragment {per}: fragment numbers would not be the official ones",
+                args.first
+            ),
+        ));
     }
     for seq in open_sequences(&args.sequence, args.layout)? {
         let end = if args.frames == 0 { seq.frames.len() } else { (args.first + args.frames).min(seq.frames.len()) };
         if args.first >= end {
-            return Err(Error::config("--first/--frames", format!("no frames of the {} frames of {} selected", seq.frames.len(), seq.name)));
+            return Err(Error::config(
+                "--first/--frames",
+                format!("no frames of the {} frames of {} selected", seq.frames.len(), seq.name),
+            ));
         }
         let (scene, clouds, n, names) = if args.single_frames {
             let working = WorkingConfig::default();
             let voxelize = VoxelizeConfig::default();
-            let mut frames: Vec<usize> = (args.first..end).step_by(args.every).flat_map(|f| std::iter::once(f).chain(args.gaps.iter().map(move |g| f + g))).filter(|&f| f < end).collect();
+            let mut frames: Vec<usize> = (args.first..end)
+                .step_by(args.every)
+                .flat_map(|f| std::iter::once(f).chain(args.gaps.iter().map(move |g| f + g)))
+                .filter(|&f| f < end)
+                .collect();
             frames.sort_unstable();
             frames.dedup();
             let pb = bar(frames.len() as u64, !args.quiet, "frames");
@@ -84,7 +101,10 @@ pub fn run(args: &FragmentsArgs, out: &mut dyn Write) -> Result<()> {
         } else {
             let ks: Vec<usize> = (args.first / per..end / per).collect();
             if ks.is_empty() {
-                return Err(Error::config("--frames", format!("frames {}..{end} of {} hold no whole fragment of {per} frames", args.first, seq.name)));
+                return Err(Error::config(
+                    "--frames",
+                    format!("frames {}..{end} of {} hold no whole fragment of {per} frames", args.first, seq.name),
+                ));
             }
             let tsdf = TsdfConfig::threedmatch();
             let pb = bar(ks.len() as u64, !args.quiet, "fragments");
@@ -102,7 +122,14 @@ pub fn run(args: &FragmentsArgs, out: &mut dyn Write) -> Result<()> {
 }
 
 /// Writes the clouds and the two benchmarks of one scene, and a summary line.
-fn write_scene(args: &FragmentsArgs, scene: &str, clouds: &[Cloud], n: usize, names: [&str; 2], out: &mut dyn Write) -> Result<()> {
+fn write_scene(
+    args: &FragmentsArgs,
+    scene: &str,
+    clouds: &[Cloud],
+    n: usize,
+    names: [&str; 2],
+    out: &mut dyn Write,
+) -> Result<()> {
     let dir = args.out.join(scene);
     for c in clouds {
         ply::write_points(&dir.join(format!("cloud_bin_{}.ply", c.index)), &c.points)?;
@@ -116,6 +143,16 @@ fn write_scene(args: &FragmentsArgs, scene: &str, clouds: &[Cloud], n: usize, na
     let lo: Vec<_> = truths.iter().filter(|p| p.overlap <= LO_MATCH_MAX).collect();
     write_benchmark(&args.out, names[0], scene, &hi)?;
     write_benchmark(&args.out, names[1], scene, &lo)?;
-    writeln!(out, "{scene}: {} clouds in {}; {} pairs: {} {}, {} {}", clouds.len(), dir.display(), truths.len(), hi.len(), names[0], lo.len(), names[1])
-        .map_err(|e| Error::io("<stdout>", e))
+    writeln!(
+        out,
+        "{scene}: {} clouds in {}; {} pairs: {} {}, {} {}",
+        clouds.len(),
+        dir.display(),
+        truths.len(),
+        hi.len(),
+        names[0],
+        lo.len(),
+        names[1]
+    )
+    .map_err(|e| Error::io("<stdout>", e))
 }

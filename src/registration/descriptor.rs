@@ -36,7 +36,11 @@ impl Descriptor {
                     .split('+')
                     .map(|r| r.trim().parse::<f32>().ok().filter(|r| r.is_finite() && *r > 0.0 && *r <= 2.0))
                     .collect::<Option<Vec<_>>>()
-                    .ok_or_else(|| bad(format!("`{s}`: FPFH radii must be numbers in (0, 2] metres joined by `+`, e.g. fpfh:0.075+0.125")))?;
+                    .ok_or_else(|| {
+                        bad(format!(
+                            "`{s}`: FPFH radii must be numbers in (0, 2] metres joined by `+`, e.g. fpfh:0.075+0.125"
+                        ))
+                    })?;
                 Ok(Descriptor::Fpfh { radii })
             }
             _ => Err(bad(format!("unknown descriptor `{s}` (known: fpfh, fpfh:RADIUS, fpfh:R1+R2+...)"))),
@@ -46,7 +50,9 @@ impl Descriptor {
     /// The name tables print.
     pub fn name(&self) -> String {
         match self {
-            Descriptor::Fpfh { radii } => format!("fpfh:{}", radii.iter().map(|r| r.to_string()).collect::<Vec<_>>().join("+")),
+            Descriptor::Fpfh { radii } => {
+                format!("fpfh:{}", radii.iter().map(|r| r.to_string()).collect::<Vec<_>>().join("+"))
+            }
         }
     }
 
@@ -68,7 +74,10 @@ mod tests {
     #[test]
     fn parses_and_rejects() {
         assert_eq!(Descriptor::parse("fpfh", "--descriptor").unwrap(), Descriptor::Fpfh { radii: vec![0.125] });
-        assert_eq!(Descriptor::parse("fpfh:0.1+0.2", "--descriptor").unwrap(), Descriptor::Fpfh { radii: vec![0.1, 0.2] });
+        assert_eq!(
+            Descriptor::parse("fpfh:0.1+0.2", "--descriptor").unwrap(),
+            Descriptor::Fpfh { radii: vec![0.1, 0.2] }
+        );
         let e = Descriptor::parse("fpfh:abc", "--compare").unwrap_err().to_string();
         assert!(e.contains("--compare") && e.contains("radii"), "{e}");
         assert!(Descriptor::parse("shot", "--descriptor").unwrap_err().to_string().contains("unknown descriptor"));

@@ -38,7 +38,14 @@ pub struct EvalConfig {
 
 impl Default for EvalConfig {
     fn default() -> Self {
-        EvalConfig { voxel: 0.025, samples: vec![5000, 1000, 250], mutual: false, ransac: RansacConfig::default(), icp_iterations: 0, seed: 0 }
+        EvalConfig {
+            voxel: 0.025,
+            samples: vec![5000, 1000, 250],
+            mutual: false,
+            ransac: RansacConfig::default(),
+            icp_iterations: 0,
+            seed: 0,
+        }
     }
 }
 
@@ -84,7 +91,12 @@ pub fn sample_indices(n: usize, k: usize, rng: &mut Rng) -> Vec<usize> {
 
 /// Scores every pair of `bench` with each of `descriptors`: `out[d]` holds descriptor d's scores, pair
 /// by pair, each pair's sample counts in `config.samples` order. `tick` is called after each pair.
-pub fn evaluate(bench: &Benchmark, descriptors: &[Descriptor], config: &EvalConfig, tick: &mut dyn FnMut()) -> Result<Vec<Vec<PairScore>>> {
+pub fn evaluate(
+    bench: &Benchmark,
+    descriptors: &[Descriptor],
+    config: &EvalConfig,
+    tick: &mut dyn FnMut(),
+) -> Result<Vec<Vec<PairScore>>> {
     let mut cache: HashMap<PathBuf, Arc<Described>> = HashMap::new();
     let mut load = |path: &PathBuf| -> Result<Arc<Described>> {
         if let Some(d) = cache.get(path) {
@@ -111,7 +123,15 @@ pub fn evaluate(bench: &Benchmark, descriptors: &[Descriptor], config: &EvalConf
     Ok(out)
 }
 
-fn score_pair(benchmark: &str, pair: &BenchPair, source: &Described, target: &Described, d: usize, n: usize, config: &EvalConfig) -> PairScore {
+fn score_pair(
+    benchmark: &str,
+    pair: &BenchPair,
+    source: &Described,
+    target: &Described,
+    d: usize,
+    n: usize,
+    config: &EvalConfig,
+) -> PairScore {
     let key = format!("{}/{}/{}", pair.scene, pair.i, pair.j);
     let seed = unit_seed(config.seed, &key, n as u64);
     let rng = Rng::new(seed);
@@ -126,7 +146,14 @@ fn score_pair(benchmark: &str, pair: &BenchPair, source: &Described, target: &De
         Some(r) => {
             let mut t = r.t_target_from_source;
             if config.icp_iterations > 0 {
-                t = icp_point_to_point(&source.points, &target.tree, &target.points, &t, config.ransac.distance, config.icp_iterations);
+                t = icp_point_to_point(
+                    &source.points,
+                    &target.tree,
+                    &target.points,
+                    &t,
+                    config.ransac.distance,
+                    config.icp_iterations,
+                );
             }
             let (rre, rte) = rre_rte(&pair.t_i_from_j, &t);
             (registration_error(&pair.t_i_from_j, &t, &pair.info), rre, rte)

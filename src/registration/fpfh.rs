@@ -116,7 +116,8 @@ pub fn fpfh_multi(points: &[Point], normals: &[Vector3<f32>], radii: &[f32], max
     let mut out = vec![0.0f32; points.len() * dim];
     for (k, f) in per.iter().enumerate() {
         for i in 0..points.len() {
-            out[i * dim + k * FPFH_DIM..i * dim + (k + 1) * FPFH_DIM].copy_from_slice(&f[i * FPFH_DIM..(i + 1) * FPFH_DIM]);
+            out[i * dim + k * FPFH_DIM..i * dim + (k + 1) * FPFH_DIM]
+                .copy_from_slice(&f[i * FPFH_DIM..(i + 1) * FPFH_DIM]);
         }
     }
     out
@@ -129,7 +130,12 @@ mod tests {
     #[test]
     fn each_angle_histogram_sums_to_200_or_0() {
         // SPFH sums to 100 per angle and the weighted neighbour part is normalised to 100.
-        let pts: Vec<Point> = (0..300).map(|i| { let a = i as f32 * 0.37; Point::new(a.cos() * (1.0 + 0.001 * i as f32), a.sin(), 2.0 + 0.003 * i as f32) }).collect();
+        let pts: Vec<Point> = (0..300)
+            .map(|i| {
+                let a = i as f32 * 0.37;
+                Point::new(a.cos() * (1.0 + 0.001 * i as f32), a.sin(), 2.0 + 0.003 * i as f32)
+            })
+            .collect();
         let normals = super::super::normals::estimate_normals(&pts, 0.3, 30);
         let f = fpfh(&pts, &normals, 0.3, 50);
         for row in f.chunks(FPFH_DIM) {

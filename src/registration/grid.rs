@@ -38,7 +38,13 @@ impl RadiusGrid {
             cells.insert(c, (start as u32, end as u32));
             start = end;
         }
-        let pts = order.iter().map(|&i| { let p = points[i as usize]; [p.x, p.y, p.z] }).collect();
+        let pts = order
+            .iter()
+            .map(|&i| {
+                let p = points[i as usize];
+                [p.x, p.y, p.z]
+            })
+            .collect();
         RadiusGrid { radius, inv, order, points: pts, cells }
     }
 
@@ -85,7 +91,15 @@ mod tests {
     #[test]
     fn same_answers_as_the_kd_tree() {
         let mut rng = Rng::new(9);
-        let pts: Vec<Point> = (0..3000).map(|_| Point::new(rng.uniform() as f32 - 0.5, rng.uniform() as f32 * 2.0, (rng.uniform() as f32 * 20.0).floor() * 0.05)).collect();
+        let pts: Vec<Point> = (0..3000)
+            .map(|_| {
+                Point::new(
+                    rng.uniform() as f32 - 0.5,
+                    rng.uniform() as f32 * 2.0,
+                    (rng.uniform() as f32 * 20.0).floor() * 0.05,
+                )
+            })
+            .collect();
         let tree = KdTree::from_points(&pts);
         let grid = RadiusGrid::new(&pts, 0.1);
         let (mut a, mut b) = (Vec::new(), Vec::new());

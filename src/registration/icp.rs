@@ -8,7 +8,14 @@ use rayon::prelude::*;
 
 /// Refines `init` (`t_target_from_source`) for at most `iterations` rounds, pairing each moved source
 /// point with its nearest target point closer than `distance`; stops when the pose moves less than 1e-7.
-pub fn icp_point_to_point(source: &[Point], target: &KdTree, target_points: &[Point], init: &Isometry3<f64>, distance: f32, iterations: usize) -> Isometry3<f64> {
+pub fn icp_point_to_point(
+    source: &[Point],
+    target: &KdTree,
+    target_points: &[Point],
+    init: &Isometry3<f64>,
+    distance: f32,
+    iterations: usize,
+) -> Isometry3<f64> {
     let mut pose = *init;
     for _ in 0..iterations {
         let pf = pose.cast::<f32>();

@@ -159,7 +159,8 @@ fn build(flat: &[f32], dim: usize, index: &mut [u32], start: usize, end: usize, 
     }
     let mid = (start + end) / 2;
     let key = |i: &u32| (flat[*i as usize * dim + axis], *i);
-    index[start..end].select_nth_unstable_by(mid - start, |a, b| key(a).partial_cmp(&key(b)).expect("finite coordinates"));
+    index[start..end]
+        .select_nth_unstable_by(mid - start, |a, b| key(a).partial_cmp(&key(b)).expect("finite coordinates"));
     let value = flat[index[mid] as usize * dim + axis];
     nodes.push(Node::Split { axis: axis as u32, value, left: 0, right: 0 });
     let left = build(flat, dim, index, start, mid, nodes);
@@ -184,7 +185,12 @@ mod tests {
             for q in 0..40 {
                 let query: Vec<f32> = (0..dim).map(|_| rng.uniform() as f32).collect();
                 let mut brute: Vec<(u32, f32)> = (0..n)
-                    .map(|i| (i as u32, flat[i * dim..(i + 1) * dim].iter().zip(&query).map(|(a, b)| (a - b) * (a - b)).sum()))
+                    .map(|i| {
+                        (
+                            i as u32,
+                            flat[i * dim..(i + 1) * dim].iter().zip(&query).map(|(a, b)| (a - b) * (a - b)).sum(),
+                        )
+                    })
                     .collect();
                 brute.sort_by(|a, b| a.1.partial_cmp(&b.1).unwrap().then(a.0.cmp(&b.0)));
                 let r2 = if dim == 3 { 0.3 } else { 3.0 };

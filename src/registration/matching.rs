@@ -48,7 +48,12 @@ pub fn match_features(source: &Features, target: &Features, mutual: bool) -> Vec
         return forward.into_iter().enumerate().map(|(i, j)| (i as u32, j)).collect();
     }
     let backward = nearest(target, source);
-    forward.into_iter().enumerate().filter(|&(i, j)| backward[j as usize] as usize == i).map(|(i, j)| (i as u32, j)).collect()
+    forward
+        .into_iter()
+        .enumerate()
+        .filter(|&(i, j)| backward[j as usize] as usize == i)
+        .map(|(i, j)| (i as u32, j))
+        .collect()
 }
 
 #[cfg(test)]

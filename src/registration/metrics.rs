@@ -67,12 +67,21 @@ mod tests {
 
     #[test]
     fn small_error_is_the_mean_squared_displacement() {
-        let pts: Vec<Point> = (0..50).map(|i| Point::new((i % 5) as f32 * 0.3, (i / 5) as f32 * 0.2 - 1.0, 2.0 + (i % 3) as f32 * 0.1)).collect();
+        let pts: Vec<Point> = (0..50)
+            .map(|i| Point::new((i % 5) as f32 * 0.3, (i / 5) as f32 * 0.2 - 1.0, 2.0 + (i % 3) as f32 * 0.1))
+            .collect();
         let info = information_matrix(&pts);
         let gt = Isometry3::new(Vector3::new(1.0, 0.0, 0.5), Vector3::new(0.0, 0.3, 0.0));
         let delta = Isometry3::new(Vector3::new(0.01, -0.02, 0.005), Vector3::new(0.004, 0.002, -0.003));
         let est = gt * delta;
-        let msd: f64 = pts.iter().map(|p| { let p = p.cast::<f64>(); (delta * p - p).norm_squared() }).sum::<f64>() / pts.len() as f64;
+        let msd: f64 = pts
+            .iter()
+            .map(|p| {
+                let p = p.cast::<f64>();
+                (delta * p - p).norm_squared()
+            })
+            .sum::<f64>()
+            / pts.len() as f64;
         let e = registration_error(&gt, &est, &info);
         assert!((e - msd).abs() < 1e-3 * msd, "{e} vs {msd}");
     }

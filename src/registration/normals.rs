@@ -56,8 +56,12 @@ mod tests {
     #[test]
     fn plane_normals_face_the_camera() {
         // The plane z = 2 − 0.5·x seen from the origin: normal ±(0.5, 0, 1)/|·|, facing −z.
-        let pts: Vec<Point> =
-            (0..400).map(|i| { let (x, y) = ((i % 20) as f32 * 0.01, (i / 20) as f32 * 0.01); Point::new(x, y, 2.0 - 0.5 * x) }).collect();
+        let pts: Vec<Point> = (0..400)
+            .map(|i| {
+                let (x, y) = ((i % 20) as f32 * 0.01, (i / 20) as f32 * 0.01);
+                Point::new(x, y, 2.0 - 0.5 * x)
+            })
+            .collect();
         let want = -Vector3::new(0.5f32, 0.0, 1.0).normalize();
         for n in estimate_normals(&pts, 0.05, 30) {
             assert!((n - want).norm() < 1e-4, "{n:?}");

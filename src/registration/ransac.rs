@@ -34,7 +34,15 @@ pub struct RansacConfig {
 
 impl Default for RansacConfig {
     fn default() -> Self {
-        RansacConfig { distance: 0.05, sample: 3, edge_ratio: 0.9, max_iterations: 50_000, confidence: 0.999, refine: true, seed: 0 }
+        RansacConfig {
+            distance: 0.05,
+            sample: 3,
+            edge_ratio: 0.9,
+            max_iterations: 50_000,
+            confidence: 0.999,
+            refine: true,
+            seed: 0,
+        }
     }
 }
 
@@ -117,7 +125,12 @@ pub fn ransac(source: &[Point], target: &[Point], corr: &[(u32, u32)], config: &
     }
     let (mut n, mut rmse, _, mut pose) = best?;
     if config.refine && n >= 3 {
-        let (si, ti): (Vec<_>, Vec<_>) = s.iter().zip(&t).filter(|(a, b)| (pose * nalgebra::Point3::from(**a) - nalgebra::Point3::from(**b)).norm_squared() < d2).map(|(a, b)| (*a, *b)).unzip();
+        let (si, ti): (Vec<_>, Vec<_>) = s
+            .iter()
+            .zip(&t)
+            .filter(|(a, b)| (pose * nalgebra::Point3::from(**a) - nalgebra::Point3::from(**b)).norm_squared() < d2)
+            .map(|(a, b)| (*a, *b))
+            .unzip();
         if let Some(p) = kabsch(&si, &ti) {
             let (n2, e2) = score(&s, &t, &p, d2);
             if n2 >= n {
@@ -141,7 +154,13 @@ fn better(a: Candidate, b: Candidate) -> Candidate {
 }
 
 /// One hypothesis: `k` distinct correspondences, the edge-length pre-check, Kabsch, the distance check.
-fn hypothesis(s: &[Vector3<f64>], t: &[Vector3<f64>], k: usize, config: &RansacConfig, rng: &mut Rng) -> Option<Isometry3<f64>> {
+fn hypothesis(
+    s: &[Vector3<f64>],
+    t: &[Vector3<f64>],
+    k: usize,
+    config: &RansacConfig,
+    rng: &mut Rng,
+) -> Option<Isometry3<f64>> {
     let mut pick: Vec<usize> = Vec::with_capacity(k);
     while pick.len() < k {
         let i = rng.below(s.len() as u64) as usize;
@@ -163,7 +182,9 @@ fn hypothesis(s: &[Vector3<f64>], t: &[Vector3<f64>], k: usize, config: &RansacC
     let (ps, pt): (Vec<_>, Vec<_>) = pick.iter().map(|&i| (s[i], t[i])).unzip();
     let pose = kabsch(&ps, &pt)?;
     let d2 = (config.distance as f64).powi(2);
-    pick.iter().all(|&i| (pose.transform_vector(&s[i]) + pose.translation.vector - t[i]).norm_squared() < d2).then_some(pose)
+    pick.iter()
+        .all(|&i| (pose.transform_vector(&s[i]) + pose.translation.vector - t[i]).norm_squared() < d2)
+        .then_some(pose)
 }
 
 /// Inliers and the sum of their squared residuals.
@@ -190,9 +211,12 @@ mod tests {
     fn recovers_a_pose_from_30_percent_inliers() {
         let mut rng = Rng::new(5);
         let truth = Isometry3::new(Vector3::new(0.3, -0.2, 0.5), Vector3::new(0.2, -0.4, 0.1));
-        let src: Vec<Point> = (0..400).map(|_| Point::new(rng.uniform() as f32 * 2.0, rng.uniform() as f32 * 2.0, rng.uniform() as f32 * 2.0)).collect();
+        let src: Vec<Point> = (0..400)
+            .map(|_| Point::new(rng.uniform() as f32 * 2.0, rng.uniform() as f32 * 2.0, rng.uniform() as f32 * 2.0))
+            .collect();
         let dst: Vec<Point> = src.iter().map(|p| truth.cast::<f32>() * p).collect();
-        let corr: Vec<(u32, u32)> = (0..400u32).map(|i| if i % 10 < 3 { (i, i) } else { (i, (i * 7 + 3) % 400) }).collect();
+        let corr: Vec<(u32, u32)> =
+            (0..400u32).map(|i| if i % 10 < 3 { (i, i) } else { (i, (i * 7 + 3) % 400) }).collect();
         let r = ransac(&src, &dst, &corr, &RansacConfig::default()).unwrap();
         assert_eq!(r.inliers, 120);
         let d = r.t_target_from_source.inverse() * truth;

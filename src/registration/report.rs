@@ -65,8 +65,8 @@ pub fn rows(descriptor: &str, scores: &[PairScore]) -> Vec<Row> {
 /// corrected by the first term of the Cornish–Fisher expansion).
 pub fn t975(df: usize) -> f64 {
     const T: [f64; 30] = [
-        12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228, 2.201, 2.179, 2.160, 2.145, 2.131, 2.120, 2.110,
-        2.101, 2.093, 2.086, 2.080, 2.074, 2.069, 2.064, 2.060, 2.056, 2.052, 2.048, 2.045, 2.042,
+        12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228, 2.201, 2.179, 2.160, 2.145, 2.131,
+        2.120, 2.110, 2.101, 2.093, 2.086, 2.080, 2.074, 2.069, 2.064, 2.060, 2.056, 2.052, 2.048, 2.045, 2.042,
     ];
     match df {
         0 => f64::NAN,
@@ -104,7 +104,12 @@ pub struct PairedRow {
 pub fn paired_ir(a: &[PairScore], b: &[PairScore]) -> Vec<PairedRow> {
     let mut out: Vec<PairedRow> = Vec::new();
     for r in rows("", a) {
-        let sel = |v: &[PairScore]| v.iter().filter(|s| s.benchmark == r.benchmark && s.samples == r.samples).map(|s| 100.0 * s.inlier_ratio).collect::<Vec<_>>();
+        let sel = |v: &[PairScore]| {
+            v.iter()
+                .filter(|s| s.benchmark == r.benchmark && s.samples == r.samples)
+                .map(|s| 100.0 * s.inlier_ratio)
+                .collect::<Vec<_>>()
+        };
         let (m, lo, hi) = paired_difference(&sel(a), &sel(b));
         out.push(PairedRow { benchmark: r.benchmark, samples: r.samples, pairs: r.pairs, mean: m, lo, hi });
     }
@@ -125,10 +130,26 @@ pub fn format_table(rows: &[Row]) -> String {
     let mut last = "";
     for r in rows {
         if r.benchmark != last {
-            let _ = writeln!(s, "\n{}\n{:<22} {:>7} {:>6} {:>7} {:>7} {:>7} {:>8} {:>8} {:>8}", r.benchmark, "descriptor", "samples", "pairs", "FMR%", "IR%", "RR%", "RR pairs", "RRE deg", "RTE m");
+            let _ = writeln!(
+                s,
+                "\n{}\n{:<22} {:>7} {:>6} {:>7} {:>7} {:>7} {:>8} {:>8} {:>8}",
+                r.benchmark, "descriptor", "samples", "pairs", "FMR%", "IR%", "RR%", "RR pairs", "RRE deg", "RTE m"
+            );
             last = &r.benchmark;
         }
-        let _ = writeln!(s, "{:<22} {:>7} {:>6} {:>7} {:>7} {:>7} {:>8} {:>8} {:>8}", r.descriptor, r.samples, r.pairs, f(r.fmr, 1), f(r.ir, 2), f(r.rr, 1), r.rr_pairs, f(r.rre_deg, 2), f(r.rte_m, 3));
+        let _ = writeln!(
+            s,
+            "{:<22} {:>7} {:>6} {:>7} {:>7} {:>7} {:>8} {:>8} {:>8}",
+            r.descriptor,
+            r.samples,
+            r.pairs,
+            f(r.fmr, 1),
+            f(r.ir, 2),
+            f(r.rr, 1),
+            r.rr_pairs,
+            f(r.rre_deg, 2),
+            f(r.rte_m, 3)
+        );
     }
     s
 }
@@ -137,7 +158,11 @@ pub fn format_table(rows: &[Row]) -> String {
 pub fn format_csv(rows: &[Row]) -> String {
     let mut s = String::from("benchmark,descriptor,samples,pairs,fmr_pct,ir_pct,rr_pct,rr_pairs,rre_deg,rte_m\n");
     for r in rows {
-        let _ = writeln!(s, "{},{},{},{},{:.4},{:.4},{:.4},{},{:.4},{:.5}", r.benchmark, r.descriptor, r.samples, r.pairs, r.fmr, r.ir, r.rr, r.rr_pairs, r.rre_deg, r.rte_m);
+        let _ = writeln!(
+            s,
+            "{},{},{},{},{:.4},{:.4},{:.4},{},{:.4},{:.5}",
+            r.benchmark, r.descriptor, r.samples, r.pairs, r.fmr, r.ir, r.rr, r.rr_pairs, r.rre_deg, r.rte_m
+        );
     }
     s
 }
@@ -154,7 +179,11 @@ pub fn format_paired(a: &str, b: &str, rows: &[PairedRow], csv: bool) -> String 
     }
     let _ = writeln!(s, "\npaired IR difference {a} - {b} (percentage points, 95% CI over pairs)");
     for r in rows {
-        let _ = writeln!(s, "{:<14} {:>7} samples {:>5} pairs  {:+.2} [{:+.2}, {:+.2}]", r.benchmark, r.samples, r.pairs, r.mean, r.lo, r.hi);
+        let _ = writeln!(
+            s,
+            "{:<14} {:>7} samples {:>5} pairs  {:+.2} [{:+.2}, {:+.2}]",
+            r.benchmark, r.samples, r.pairs, r.mean, r.lo, r.hi
+        );
     }
     s
 }

@@ -27,18 +27,29 @@ fn records(path: &Path, rows: usize, cols: usize) -> Result<Vec<((usize, usize, 
     let text = read_text(path)?;
     let lines: Vec<(usize, &str)> = text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty()).collect();
     if lines.len() % (rows + 1) != 0 {
-        return Err(Error::input(path, format!("{} non-empty lines is not a whole number of {}-line records", lines.len(), rows + 1)));
+        return Err(Error::input(
+            path,
+            format!("{} non-empty lines is not a whole number of {}-line records", lines.len(), rows + 1),
+        ));
     }
     let mut out = Vec::new();
     for rec in lines.chunks(rows + 1) {
         let (ln, head) = rec[0];
-        let h: Vec<usize> = head.split_whitespace().map(str::parse).collect::<std::result::Result<_, _>>().map_err(|_| Error::input(path, format!("line {}: `{head}` is not `i j n`", ln + 1)))?;
+        let h: Vec<usize> = head
+            .split_whitespace()
+            .map(str::parse)
+            .collect::<std::result::Result<_, _>>()
+            .map_err(|_| Error::input(path, format!("line {}: `{head}` is not `i j n`", ln + 1)))?;
         let [i, j, n] = h[..] else {
             return Err(Error::input(path, format!("line {}: `{head}` is not `i j n`", ln + 1)));
         };
         let mut values = Vec::with_capacity(rows * cols);
         for &(ln, l) in &rec[1..] {
-            let v: Vec<f64> = l.split_whitespace().map(str::parse).collect::<std::result::Result<_, _>>().map_err(|_| Error::input(path, format!("line {}: `{l}` is not {cols} numbers", ln + 1)))?;
+            let v: Vec<f64> = l
+                .split_whitespace()
+                .map(str::parse)
+                .collect::<std::result::Result<_, _>>()
+                .map_err(|_| Error::input(path, format!("line {}: `{l}` is not {cols} numbers", ln + 1)))?;
             if v.len() != cols || v.iter().any(|x| !x.is_finite()) {
                 return Err(Error::input(path, format!("line {}: expected {cols} finite numbers, got `{l}`", ln + 1)));
             }
@@ -78,7 +89,9 @@ pub fn read_gt_overlap(path: &Path) -> Result<Vec<((usize, usize), f64)>> {
                 [i, j, o] => i.parse::<usize>().ok().zip(j.parse::<usize>().ok()).zip(o.parse::<f64>().ok()),
                 _ => None,
             };
-            parsed.map(|(ij, o)| (ij, o)).ok_or_else(|| Error::input(path, format!("line {}: `{l}` is not `i j overlap`", ln + 1)))
+            parsed
+                .map(|(ij, o)| (ij, o))
+                .ok_or_else(|| Error::input(path, format!("line {}: `{l}` is not `i j overlap`", ln + 1)))
         })
         .collect()
 }

@@ -45,7 +45,11 @@ pub struct Benchmark {
 }
 
 fn sorted_dirs(dir: &Path) -> Result<Vec<PathBuf>> {
-    let mut out: Vec<PathBuf> = std::fs::read_dir(dir).map_err(|e| Error::io(dir, e))?.filter_map(|e| e.ok().map(|e| e.path())).filter(|p| p.is_dir()).collect();
+    let mut out: Vec<PathBuf> = std::fs::read_dir(dir)
+        .map_err(|e| Error::io(dir, e))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.is_dir())
+        .collect();
     out.sort();
     Ok(out)
 }
@@ -60,20 +64,35 @@ fn scene_pairs(scene: &str, eval_dir: &Path, clouds: &Path) -> Result<Vec<BenchP
     let info_path = eval_dir.join("gt.info");
     let infos: HashMap<(usize, usize), Matrix6<f64>> = read_gt_info(&info_path)?.into_iter().collect();
     let overlap_path = eval_dir.join("gt_overlap.log");
-    let overlaps: HashMap<(usize, usize), f64> = if overlap_path.is_file() { read_gt_overlap(&overlap_path)?.into_iter().collect() } else { HashMap::new() };
+    let overlaps: HashMap<(usize, usize), f64> =
+        if overlap_path.is_file() { read_gt_overlap(&overlap_path)?.into_iter().collect() } else { HashMap::new() };
     read_gt_log(&log)?
         .into_iter()
         .map(|p| {
-            let info = *infos.get(&(p.i, p.j)).ok_or_else(|| Error::input(&info_path, format!("no information matrix for pair {} {} of {}", p.i, p.j, log.display())))?;
+            let info = *infos.get(&(p.i, p.j)).ok_or_else(|| {
+                Error::input(&info_path, format!("no information matrix for pair {} {} of {}", p.i, p.j, log.display()))
+            })?;
             let cloud = |k: usize| {
                 let path = clouds.join(format!("cloud_bin_{k}.ply"));
                 if path.is_file() {
                     Ok(path)
                 } else {
-                    Err(Error::input(&log, format!("pair {} {}: fragment cloud {} does not exist", p.i, p.j, path.display())))
+                    Err(Error::input(
+                        &log,
+                        format!("pair {} {}: fragment cloud {} does not exist", p.i, p.j, path.display()),
+                    ))
                 }
             };
-            Ok(BenchPair { scene: scene.to_string(), i: p.i, j: p.j, t_i_from_j: p.t_i_from_j, info, overlap: overlaps.get(&(p.i, p.j)).copied(), target_path: cloud(p.i)?, source_path: cloud(p.j)? })
+            Ok(BenchPair {
+                scene: scene.to_string(),
+                i: p.i,
+                j: p.j,
+                t_i_from_j: p.t_i_from_j,
+                info,
+                overlap: overlaps.get(&(p.i, p.j)).copied(),
+                target_path: cloud(p.i)?,
+                source_path: cloud(p.j)?,
+            })
         })
         .collect()
 }

@@ -56,10 +56,16 @@ pub fn fuse_fragment(seq: &Sequence, k: usize, per: usize, tsdf: &TsdfConfig, we
 
 /// Frame `f`'s cloud as a build makes it: the working resolution and intrinsics, back-projection within
 /// the depth range, the crop box, the voxel grid (`working`, `voxelize`).
-pub fn single_frame_cloud(seq: &Sequence, f: usize, working: &WorkingConfig, voxelize: &VoxelizeConfig) -> Result<Cloud> {
+pub fn single_frame_cloud(
+    seq: &Sequence,
+    f: usize,
+    working: &WorkingConfig,
+    voxelize: &VoxelizeConfig,
+) -> Result<Cloud> {
     let (frame, pose) = pose_of(seq, f)?;
     let (depth, k) = working.map_frame(&frame)?;
-    let points = voxel_downsample(&working.crop_box.crop(&backproject(&depth, &k, working.depth_range())), voxelize.voxel);
+    let points =
+        voxel_downsample(&working.crop_box.crop(&backproject(&depth, &k, working.depth_range())), voxelize.voxel);
     Ok(Cloud { index: f, points, t_world_from_camera: pose })
 }
 
@@ -75,7 +81,12 @@ pub struct PairTruth {
 /// Ground truth of every pair of clouds `(i, j)`, `i < j` by position in `clouds`, that `keep(index i,
 /// index j)` accepts and whose overlap is in `[MIN_OVERLAP, max_overlap]`; `n` is the count written in
 /// gt.log headers.
-pub fn pair_truths(clouds: &[Cloud], n: usize, max_overlap: f64, keep: &dyn Fn(usize, usize) -> bool) -> Vec<PairTruth> {
+pub fn pair_truths(
+    clouds: &[Cloud],
+    n: usize,
+    max_overlap: f64,
+    keep: &dyn Fn(usize, usize) -> bool,
+) -> Vec<PairTruth> {
     let down: Vec<Vec<Point>> = clouds.par_iter().map(|c| voxel_downsample(&c.points, PAIR_VOXEL)).collect();
     let mut todo = Vec::new();
     for a in 0..clouds.len() {
@@ -95,8 +106,13 @@ pub fn pair_truths(clouds: &[Cloud], n: usize, max_overlap: f64, keep: &dyn Fn(u
             }
             let index = RadiusIndex::new(&down[a], OVERLAP_RADIUS);
             let moved = transform_points(&down[b], &t);
-            let overlapping: Vec<Point> = down[b].iter().zip(&moved).filter(|(_, m)| index.has_neighbor(m)).map(|(p, _)| *p).collect();
-            Some(PairTruth { gt: GtPair { i: clouds[a].index, j: clouds[b].index, n, t_i_from_j: t }, overlap: o, info: information_matrix(&overlapping) })
+            let overlapping: Vec<Point> =
+                down[b].iter().zip(&moved).filter(|(_, m)| index.has_neighbor(m)).map(|(p, _)| *p).collect();
+            Some(PairTruth {
+                gt: GtPair { i: clouds[a].index, j: clouds[b].index, n, t_i_from_j: t },
+                overlap: o,
+                info: information_matrix(&overlapping),
+            })
         })
         .collect()
 }
@@ -106,5 +122,8 @@ pub fn write_benchmark(root: &Path, name: &str, scene: &str, pairs: &[&PairTruth
     let dir = root.join("metadata/benchmarks").join(name).join(scene);
     write_gt_log(&dir.join("gt.log"), &pairs.iter().map(|p| p.gt.clone()).collect::<Vec<_>>())?;
     write_gt_info(&dir.join("gt.info"), &pairs.iter().map(|p| (p.gt.clone(), p.info)).collect::<Vec<_>>())?;
-    write_gt_overlap(&dir.join("gt_overlap.log"), &pairs.iter().map(|p| ((p.gt.i, p.gt.j), p.overlap)).collect::<Vec<_>>())
+    write_gt_overlap(
+        &dir.join("gt_overlap.log"),
+        &pairs.iter().map(|p| ((p.gt.i, p.gt.j), p.overlap)).collect::<Vec<_>>(),
+    )
 }
