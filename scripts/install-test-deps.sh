@@ -4,7 +4,8 @@
 # starts (`python3 -m moto.server`; it brings boto3, which tests/python/s3_peer.py uses); and torch 2.13.0
 # with safetensors, which tests/checkpoints.rs saves and converts the authors' kind of checkpoints with (through scripts/install-network-peers.sh: PyPI's CUDA
 # build, ~3 GB to download, 4.6 GB installed, 54 s here; it runs on the CPU). `make test` and .ci/run run
-# this first.
+# this first. open3d 0.19.0 (with Debian's libusb-1.0-0, which its import may need) is the peer of
+# tests/registration.rs (normals, FPFH, RANSAC; tests/python/open3d_registration.py): a ~450 MB wheel.
 #
 # Idempotent: installs nothing that already imports.
 # PYTHON selects the interpreter (default python3).
@@ -16,7 +17,8 @@ DUCKDB_VERSION="2.0.0"
 MOTO_VERSION="5.2.1"
 FLASK_VERSION="3.1.3"
 FLASK_CORS_VERSION="6.0.2"
-CHECK='import pyarrow, duckdb, moto.server, flask, flask_cors, boto3'
+OPEN3D_VERSION="0.19.0"
+CHECK='import pyarrow, duckdb, moto.server, flask, flask_cors, boto3, open3d'
 
 die() {
     echo "install-test-deps: $*" >&2
@@ -27,12 +29,31 @@ modules_import() {
     "$PYTHON" -c "$CHECK" >/dev/null 2>&1
 }
 
+# libusb-1.0-0 from Debian (open3d loads it at import on some builds): apt-get update only when the
+# plain install fails (stale lists).
+install_libusb() {
+    if dpkg -s libusb-1.0-0 >/dev/null 2>&1; then
+        return 0
+    fi
+    if ! command -v apt-get >/dev/null 2>&1 || [[ $(id -u) -ne 0 ]]; then
+        echo "install-test-deps: warning: cannot install libusb-1.0-0 (needs root and apt-get); open3d may fail to import" >&2
+        return 0
+    fi
+    echo "install-test-deps: apt-get install libusb-1.0-0"
+    if ! DEBIAN_FRONTEND=noninteractive apt-get install -y -q libusb-1.0-0 >/dev/null; then
+        DEBIAN_FRONTEND=noninteractive apt-get update -q >/dev/null ||
+            die "apt-get update failed: is the Debian package registry reachable?"
+        DEBIAN_FRONTEND=noninteractive apt-get install -y -q libusb-1.0-0 >/dev/null ||
+            die "apt-get install libusb-1.0-0 failed"
+    fi
+}
+
 torch_peers() {
     PYTHON="$PYTHON" "$(dirname "$0")/install-network-peers.sh"
 }
 
 if modules_import; then
-    echo "install-test-deps: already installed ($("$PYTHON" -c 'import pyarrow, duckdb, importlib.metadata as m; print("pyarrow", pyarrow.__version__, "duckdb", duckdb.__version__, "moto", m.version("moto"))'))"
+    echo "install-test-deps: already installed ($("$PYTHON" -c 'import pyarrow, duckdb, importlib.metadata as m; print("pyarrow", pyarrow.__version__, "duckdb", duckdb.__version__, "moto", m.version("moto"), "open3d", m.version("open3d"))'))"
     torch_peers
     exit 0
 fi
@@ -40,16 +61,17 @@ fi
 command -v "$PYTHON" >/dev/null 2>&1 || die "no Python interpreter '$PYTHON' (set PYTHON=...)"
 "$PYTHON" -m pip --version >/dev/null 2>&1 || die "'$PYTHON -m pip' does not work; install pip first"
 
-echo "install-test-deps: $PYTHON -m pip install pyarrow==$PYARROW_VERSION duckdb==$DUCKDB_VERSION moto[s3]==$MOTO_VERSION flask==$FLASK_VERSION flask-cors==$FLASK_CORS_VERSION"
+install_libusb
+echo "install-test-deps: $PYTHON -m pip install pyarrow==$PYARROW_VERSION duckdb==$DUCKDB_VERSION moto[s3]==$MOTO_VERSION flask==$FLASK_VERSION flask-cors==$FLASK_CORS_VERSION open3d==$OPEN3D_VERSION"
 if ! "$PYTHON" -m pip install --disable-pip-version-check -q \
     "pyarrow==$PYARROW_VERSION" "duckdb==$DUCKDB_VERSION" "moto[s3]==$MOTO_VERSION" \
-    "flask==$FLASK_VERSION" "flask-cors==$FLASK_CORS_VERSION"; then
+    "flask==$FLASK_VERSION" "flask-cors==$FLASK_CORS_VERSION" "open3d==$OPEN3D_VERSION"; then
     die "pip install failed: is PyPI reachable? (see pip's message above)"
 fi
 
 if ! modules_import; then
     "$PYTHON" -c "$CHECK" || true
-    die "pyarrow, duckdb and moto were installed but do not import (see the error above)"
+    die "pyarrow, duckdb, moto and open3d were installed but do not import (see the error above)"
 fi
 torch_peers
 echo "install-test-deps: done"

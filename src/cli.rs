@@ -22,6 +22,9 @@ pub enum Command {
     Build(commands::build::BuildArgs),
     /// Fuse consecutive frames of a sequence (TSDF) and write the surface cloud and mesh as PLY.
     Fuse(commands::fuse::FuseArgs),
+    /// A registration benchmark from posed sequences in the official 3DMatch layout: TSDF fragments
+    /// (3DMatch / 3DLoMatch by overlap) or `--single-frames` pairs, with gt.log, gt.info, gt_overlap.log.
+    Fragments(commands::fragments::FragmentsArgs),
     /// Build depth-correction training labels by TSDF fusion of sequences (resumable, shardable).
     Labels(commands::labels::LabelsArgs),
     /// Render a synthetic indoor scene, re-project one frame into a sampled pose, and write the two
@@ -49,7 +52,8 @@ pub enum Command {
     Train(commands::train::TrainArgs),
     /// Evaluate: `eval correction` compares the handcrafted filters and U-Net checkpoints on held-out
     /// label shards; `eval inpaint` compares correction and fill methods with the depth captured on real
-    /// sequences. Tables and CSV.
+    /// sequences; `eval registration` scores a descriptor on a registration benchmark (FMR, IR, RR).
+    /// Tables and CSV.
     Eval(commands::eval::EvalArgs),
 }
 
@@ -67,6 +71,7 @@ impl Cli {
             Command::Build(a) => commands::build::run(a, out),
             Command::Demo(a) => commands::demo::run(a, out),
             Command::Fuse(a) => commands::fuse::run(a, out),
+            Command::Fragments(a) => commands::fragments::run(a, out),
             Command::Labels(a) => commands::labels::run(a, out),
             Command::Synth(a) => commands::synth::run(a, out),
             Command::Inspect(a) => commands::inspect::run(a, out),

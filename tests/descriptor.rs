@@ -4,8 +4,8 @@
 
 mod support;
 
-use pointreggpt::descriptor::learned::{describe_with, read_meta, LearnedDescriptor};
-use pointreggpt::descriptor::PatchConfig;
+use pointreggpt::registration::learned::{describe_with, read_meta, LearnedDescriptor};
+use pointreggpt::registration::patch::PatchConfig;
 use pointreggpt::geometry::{Point, RadiusIndex};
 use pointreggpt::nn::patch_net::{PatchNet, PatchNetConfig};
 use pointreggpt::nn::checkpoint::read_tensors;

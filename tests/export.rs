@@ -18,7 +18,7 @@ use pointreggpt::shards::dataset::Dataset;
 use pointreggpt::shards::row::{PairRow, Status};
 use serde_json::json;
 use std::path::{Path, PathBuf};
-use support::ply::read_ply;
+use pointreggpt::ply::read_ply;
 use support::{bin, python, synthetic_config};
 
 /// 2 scenes × 4 frames, one sample each, shards of 4; `min_overlap = 0.6` rejects some pairs, so the

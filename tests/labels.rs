@@ -153,7 +153,7 @@ fn fuse_command_writes_a_cloud_on_the_true_surface_and_a_mesh() {
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let points = support::ply::read_ply(&dir.path().join("fused/fused.cloud.ply")).unwrap();
+    let points = pointreggpt::ply::read_ply(&dir.path().join("fused/fused.cloud.ply")).unwrap();
     assert!(points.len() > 10_000);
     assert!(String::from_utf8_lossy(&o.stdout).contains(&format!("{} surface points", points.len())));
     // The cloud is in frame 0's camera coordinates: move it to the world and measure the distance to the scene.

@@ -18,7 +18,7 @@ const MAX_LINES: usize = 400;
 
 /// Top-level modules the build's inference path is made of, and those they may never import.
 const INFERENCE: [&str; 13] =
-    ["atomic", "geometry", "rng", "runtime", "shards", "sources", "tsdf", "nn", "correction", "diffusion", "inpainting", "stages", "descriptor"];
+    ["atomic", "geometry", "rng", "runtime", "shards", "sources", "tsdf", "nn", "correction", "diffusion", "inpainting", "stages", "registration"];
 const ABOVE_INFERENCE: [&str; 7] = ["training", "commands", "cli", "export", "preview", "query", "labels"];
 
 fn src_dir() -> PathBuf {

@@ -1,12 +1,11 @@
-//! PLY: what `pointreggpt::ply` writes, read back by the tests' general reader (`support::ply`), and
-//! that reader on hand-made files of the other PLY flavours (ascii, big-endian, extra elements).
+//! PLY: what `pointreggpt::ply::write` writes, checked byte by byte and read back by `pointreggpt::ply::read`,
+//! and that reader on hand-made files of the other PLY flavours (ascii, big-endian, extra elements).
 
 mod support;
 
 use pointreggpt::geometry::Point;
-use pointreggpt::ply::{encode_points, write_mesh, write_points};
+use pointreggpt::ply::{decode_ply, encode_points, read_ply, write_mesh, write_points};
 use std::path::Path;
-use support::ply::{decode_ply, read_ply};
 
 fn pts() -> Vec<Point> {
     vec![Point::new(0.0, -1.5, 2.25), Point::new(1e-3, 3.0e4, -0.125), Point::new(-7.0, 0.5, 1.0)]

@@ -13,7 +13,7 @@ use rayon::prelude::*;
 use std::time::Instant;
 
 mod support;
-use support::ply::read_ply;
+use pointreggpt::ply::read_ply;
 use support::real_data;
 
 /// `q`-quantile (0..1) of `v`.

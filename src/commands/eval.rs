@@ -20,6 +20,9 @@ pub enum EvalWhat {
     /// Re-project real frames into the stored pose of a later frame, correct, fill, and compare with the
     /// depth captured there.
     Inpaint(EvalInpaintArgs),
+    /// The 3DMatch registration protocol (FMR, IR, RR, RRE, RTE) on a benchmark folder with a descriptor,
+    /// and the paired IR difference against a second one (`--compare`).
+    Registration(super::eval_registration::EvalRegistrationArgs),
 }
 
 #[derive(Debug, clap::Args)]
@@ -128,6 +131,7 @@ pub fn run(args: &EvalArgs, out: &mut dyn Write) -> Result<()> {
     match &args.what {
         EvalWhat::Correction(a) => run_correction(a, out),
         EvalWhat::Inpaint(a) => run_inpaint(a, out),
+        EvalWhat::Registration(a) => super::eval_registration::run(a, out),
     }
 }
 

@@ -14,3 +14,5 @@ pub mod verify;
 pub mod train;
 pub mod train_descriptor;
 pub mod eval;
+pub mod eval_registration;
+pub mod fragments;

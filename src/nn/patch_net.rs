@@ -1,5 +1,5 @@
 //! The patch descriptor network (issue 16): a 3D ConvNet from a `voxels`³ TDF patch
-//! ([`crate::descriptor::patch`]) to a unit vector. Two stride-2 convolutions bring the cube to a quarter
+//! ([`crate::registration::patch`]) to a unit vector. Two stride-2 convolutions bring the cube to a quarter
 //! of its edge, a convolution as wide as what is left makes it one voxel, a linear layer gives the
 //! descriptor.
 

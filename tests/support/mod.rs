@@ -1,7 +1,6 @@
 //! Shared fixtures for the integration tests.
 #![allow(dead_code)]
 
-pub mod ply;
 pub mod store;
 
 use std::path::PathBuf;

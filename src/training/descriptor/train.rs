@@ -4,8 +4,8 @@
 //! checkpoint, so `--resume` continues exactly; the per-step randomness comes from (seed, step).
 
 use super::data::{correspondences, TrainPair};
-use crate::descriptor::learned::{load_into, read_meta, save, DescriptorMeta, FORMAT};
-use crate::descriptor::patch::{patches, PatchConfig};
+use crate::registration::learned::{load_into, read_meta, save, DescriptorMeta, FORMAT};
+use crate::registration::patch::{patches, PatchConfig};
 use crate::error::{Error, Result};
 use crate::geometry::{Point, RadiusIndex};
 use crate::nn::patch_net::{PatchNet, PatchNetConfig};

@@ -1,5 +1,5 @@
-//! PLY writing, the one place for it: point clouds (`x y z` floats) and triangle meshes, binary
-//! little-endian, readable by Open3D, CloudCompare, MeshLab and numpy. Nothing in the product reads PLY.
+//! PLY writing: point clouds (`x y z` floats) and triangle meshes, binary little-endian, readable by
+//! Open3D, CloudCompare, MeshLab, numpy and [`super::read`].
 
 use crate::error::{Error, Result};
 use crate::geometry::Point;

@@ -1,9 +1,9 @@
-//! A general PLY reader for the tests: the vertex positions of ascii or binary (little- or big-endian)
-//! PLY files, whatever other elements and properties they carry. The product only writes PLY
-//! (`pointreggpt::ply`); this reader is the independent check of what it writes.
+//! The PLY reader: the vertex positions of ascii or binary (little- or big-endian) PLY files, whatever
+//! other elements and properties they carry (fragment clouds of the official 3DMatch benchmark, and
+//! what [`super::write`] writes).
 
-use pointreggpt::geometry::Point;
-use pointreggpt::{Error, Result};
+use crate::error::{Error, Result};
+use crate::geometry::Point;
 use std::path::Path;
 
 /// Reads the vertex positions of the PLY file at `path` (see [`decode_ply`]).
