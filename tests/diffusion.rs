@@ -113,7 +113,7 @@ fn the_inpainter_keeps_metric_depths_exactly_and_fills_the_holes() {
     let data: Vec<f32> = (0..w * h).map(|_| r.uniform_range(0.6, 4.0) as f32).collect();
     let known: Vec<bool> = (0..w * h).map(|_| r.uniform() < 0.5).collect();
     let d = DepthMap::new(w, h, data.clone()).unwrap();
-    let ctx = InpaintContext { intrinsics: Intrinsics::new(30.0, 30.0, 16.0, 12.0, w, h).unwrap(), seed: 4 };
+    let ctx = InpaintContext { intrinsics: Intrinsics::new(30.0, 30.0, 16.0, 12.0, w, h).unwrap(), seed: 4, t_target_from_source: Isometry3::identity() };
     let out = inpainter.inpaint(&d, &known, &ctx);
     for i in 0..(w * h) as usize {
         if known[i] {
@@ -139,7 +139,7 @@ fn a_view_gives_the_same_result_whichever_views_share_its_batch() {
             let mut r = Rng::new(100 + i);
             let d: Vec<f32> = (0..w * h).map(|_| r.uniform_range(0.6, 4.0) as f32).collect();
             let known: Vec<bool> = (0..w * h).map(|_| r.uniform() < 0.4).collect();
-            (DepthMap::new(w, h, d).unwrap(), known, InpaintContext { intrinsics: k, seed: 7 + i })
+            (DepthMap::new(w, h, d).unwrap(), known, InpaintContext { intrinsics: k, seed: 7 + i, t_target_from_source: Isometry3::identity() })
         })
         .collect();
     let v = |i: usize| (&views[i].0, views[i].1.as_slice(), &views[i].2);
@@ -580,12 +580,12 @@ fn a_torchscript_denoiser_samples_like_the_native_one() {
     let data: Vec<f32> = (0..w * h).map(|_| r.uniform_range(0.6, 4.0) as f32).collect();
     let known: Vec<bool> = (0..w * h).map(|_| r.uniform() < 0.5).collect();
     let d = DepthMap::new(w, h, data.clone()).unwrap();
-    let ctx = InpaintContext { intrinsics: Intrinsics::new(30.0, 30.0, 16.0, 12.0, w, h).unwrap(), seed: 4 };
+    let ctx = InpaintContext { intrinsics: Intrinsics::new(30.0, 30.0, 16.0, 12.0, w, h).unwrap(), seed: 4, t_target_from_source: Isometry3::identity() };
     // The native network pads 24 rows to 24 (multiple of 8), TorchScript to 32: compare the TorchScript
     // output with a native run on the same 32x32 padding instead.
     let d32 = DepthMap::new(w, 32, data.iter().copied().chain(std::iter::repeat(0.0).take((w * 8) as usize)).collect()).unwrap();
     let known32: Vec<bool> = known.iter().copied().chain(std::iter::repeat(false).take((w * 8) as usize)).collect();
-    let ctx32 = InpaintContext { intrinsics: Intrinsics::new(30.0, 30.0, 16.0, 12.0, w, 32).unwrap(), seed: 4 };
+    let ctx32 = InpaintContext { intrinsics: Intrinsics::new(30.0, 30.0, 16.0, 12.0, w, 32).unwrap(), seed: 4, t_target_from_source: Isometry3::identity() };
     let a = native.inpaint(&d32, &known32, &ctx32);
     let b = scripted.inpaint(&d, &known, &ctx);
     for i in 0..(w * h) as usize {
@@ -665,7 +665,7 @@ fn a_push_pull_start_runs_exactly_the_configured_steps_and_refuses_more_than_it_
     let mut r = Rng::new(5);
     let d = DepthMap::new(w, h, (0..w * h).map(|_| r.uniform_range(0.6, 4.0) as f32).collect()).unwrap();
     let known: Vec<bool> = (0..w * h).map(|_| r.uniform() < 0.5).collect();
-    let ctx = InpaintContext { intrinsics: Intrinsics::new(15.0, 15.0, 8.0, 6.0, w, h).unwrap(), seed: 1 };
+    let ctx = InpaintContext { intrinsics: Intrinsics::new(15.0, 15.0, 8.0, 6.0, w, h).unwrap(), seed: 1, t_target_from_source: Isometry3::identity() };
     for (steps, want) in [(1, vec![4]), (3, vec![4, 2, 0]), (5, vec![4, 3, 2, 1, 0])] {
         config(steps).validate("inpaint").unwrap_or_else(|e| panic!("{steps} steps: {e}"));
         let calls = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));

@@ -8,3 +8,4 @@
 pub mod correction;
 pub mod diffusion;
 pub mod eval_inpaint;
+pub mod fill_metrics;
