@@ -9,6 +9,7 @@ use super::nearest::nearest_source_indices;
 use super::{InpaintContext, Inpainter};
 use crate::geometry::{DepthMap, Intrinsics};
 use nalgebra::Isometry3;
+use rayon::prelude::*;
 
 /// Two hole borders whose depths differ by at most this share of the nearer are one surface.
 pub const SAME_SURFACE_REL: f32 = 0.05;
@@ -30,17 +31,18 @@ impl Inpainter for Background {
         let d = depth.data();
         let sources: Vec<bool> = d.iter().zip(known).map(|(z, k)| *k && *z > 0.0).collect();
         let epipole = epipole(&ctx.intrinsics, &ctx.t_target_from_source);
-        let mut nearest: Option<Vec<Option<usize>>> = None;
-        let mut out = d.to_vec();
-        for j in 0..w * h {
-            if known[j] {
-                continue;
-            }
-            let (c, r) = ((j % w) as f64, (j / w) as f64);
-            let border = epipolar_direction(epipole, c, r).and_then(|(dx, dy)| {
-                let a = first_source(&sources, w, h, c, r, dx, dy);
-                let b = first_source(&sources, w, h, c, r, -dx, -dy);
-                match (a, b) {
+        // Rows in parallel (each pixel's fill depends only on the input); `None`: no border found.
+        let borders: Vec<Option<f32>> = (0..h)
+            .into_par_iter()
+            .flat_map_iter(|r| (0..w).map(move |c| (r, c)))
+            .map(|(r, c)| {
+                let j = r * w + c;
+                if known[j] {
+                    return Some(d[j]);
+                }
+                let (c, r) = (c as f64, r as f64);
+                let (dx, dy) = epipolar_direction(epipole, c, r)?;
+                match (first_source(&sources, w, h, c, r, dx, dy), first_source(&sources, w, h, c, r, -dx, -dy)) {
                     (Some((a, na)), Some((b, nb))) => {
                         let (za, zb) = (d[a], d[b]);
                         Some(if (za - zb).abs() <= SAME_SURFACE_REL * za.min(zb) {
@@ -52,12 +54,17 @@ impl Inpainter for Background {
                     }
                     (a, b) => a.or(b).map(|(i, _)| d[i]),
                 }
-            });
-            out[j] = match border {
-                Some(z) => z,
-                None => nearest.get_or_insert_with(|| nearest_source_indices(&sources, w, h))[j].map_or(0.0, |i| d[i]),
-            };
-        }
+            })
+            .collect();
+        let nearest = borders.contains(&None).then(|| nearest_source_indices(&sources, w, h));
+        let out: Vec<f32> = borders
+            .iter()
+            .enumerate()
+            .map(|(j, b)| match b {
+                Some(z) => *z,
+                None => nearest.as_ref().and_then(|n| n[j]).map_or(0.0, |i| d[i]),
+            })
+            .collect();
         DepthMap::new(depth.width(), depth.height(), out).expect("copies of valid depths are valid")
     }
 }
@@ -81,13 +88,15 @@ fn epipolar_direction(e: [f64; 3], c: f64, r: f64) -> Option<(f64, f64)> {
 /// The first source pixel met walking from `(c, r)` in steps of `(dx, dy)` before leaving the image, and
 /// the number of steps.
 fn first_source(sources: &[bool], w: usize, h: usize, c: f64, r: f64, dx: f64, dy: f64) -> Option<(usize, u32)> {
+    let (wl, hl) = (w as f64 - 0.5, h as f64 - 0.5);
     let mut i = 1u32;
     loop {
-        let (x, y) = ((c + i as f64 * dx).round(), (r + i as f64 * dy).round());
-        if x < 0.0 || y < 0.0 || x >= w as f64 || y >= h as f64 {
+        let (x, y) = (c + i as f64 * dx, r + i as f64 * dy);
+        // round(x) in 0..w, i.e. x in (−0.5, w − 0.5); then round(x) = floor(x + 0.5) = (x + 0.5) as usize.
+        if x <= -0.5 || y <= -0.5 || x >= wl || y >= hl {
             return None;
         }
-        let j = y as usize * w + x as usize;
+        let j = (y + 0.5) as usize * w + (x + 0.5) as usize;
         if sources[j] {
             return Some((j, i));
         }
