@@ -489,6 +489,40 @@ fn eval_inpaint_on_real_frames_scores_every_method() {
     assert!(get("min_pool", "none", "unknown_share") > get("none", "none", "unknown_share"));
 }
 
+#[test]
+fn eval_inpaint_scores_a_build_config_and_dumps_the_views_it_scored() {
+    let Some(real) = support::real_data() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let views = dir.path().join("views");
+    let config = "pipelines/paper-3dmatch-classical.toml";
+    let args = ["--max-views", "2", "--pipeline", config, "--dump-views", views.to_str().unwrap()];
+    let text = eval_inpaint(&real, &dir.path().join("eval.csv"), &args);
+    let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
+    let rows: Vec<Vec<&str>> = text.lines().skip(1).map(|l| l.split(',').collect()).collect();
+    // One row: the config's condition correction (min-pool) and its fill, named by the file.
+    assert_eq!(rows.len(), 1, "{text}");
+    assert_eq!((rows[0][0], rows[0][1]), ("min_pool", "paper-3dmatch-classical"));
+    let col = |name: &str| rows[0][header.iter().position(|h| *h == name).unwrap()].parse::<f64>().unwrap();
+    assert!(col("fill_coverage") > 0.9);
+    // The dumped masks are the views scored: their unknown share is the CSV's.
+    let folder = views.join("paper-3dmatch-classical").join("min_pool");
+    let meta: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(folder.join("views.json")).unwrap()).unwrap();
+    assert_eq!(meta["views"].as_array().unwrap().len(), 2);
+    let (mut unknown, mut pixels) = (0usize, 0usize);
+    for i in 0..2 {
+        let (w, h) = (meta["views"][i]["width"].as_u64().unwrap() as usize, meta["views"][i]["height"].as_u64().unwrap() as usize);
+        let mask = std::fs::read(folder.join(format!("{i:03}_known.npy"))).unwrap();
+        let header_len = u16::from_le_bytes([mask[8], mask[9]]) as usize;
+        assert_eq!(mask.len(), 10 + header_len + w * h);
+        unknown += mask[10 + header_len..].iter().filter(|b| **b == 0).count();
+        pixels += w * h;
+        for name in ["condition", "captured"] {
+            assert_eq!(std::fs::metadata(folder.join(format!("{i:03}_{name}.npy"))).unwrap().len() as usize, 10 + 118 + 4 * w * h);
+        }
+    }
+    assert!((unknown as f64 / pixels as f64 - col("unknown_share")).abs() < 1e-6, "{text}");
+}
+
 /// Filled-pixel (AbsRel, RMSE, delta < 1.25) of one `eval inpaint` row.
 #[derive(Clone, Copy, Debug)]
 struct Fill {
