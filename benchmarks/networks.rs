@@ -568,7 +568,7 @@ fn demo_fill_seconds(depth: Vec<f32>, known: &[bool]) -> std::result::Result<(f6
     let inpainter = config.inpaint.build().map_err(|e| e.to_string())?;
     let n = SIZE as u32;
     let map = DepthMap::new(n, n, depth).map_err(|e| e.to_string())?;
-    let ctx = InpaintContext { intrinsics: Intrinsics::new(311.0, 312.0, 128.5, 128.0, n, n).map_err(|e| e.to_string())?, seed: 3 };
+    let ctx = InpaintContext { intrinsics: Intrinsics::new(311.0, 312.0, 128.5, 128.0, n, n).map_err(|e| e.to_string())?, seed: 3, t_target_from_source: nalgebra::Isometry3::identity() };
     let (ms, _) = median_ms(1, DDIM_REPS, || inpainter.inpaint(&map, known, &ctx));
     Ok((ms / 1e3, desc))
 }

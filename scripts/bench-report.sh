@@ -27,6 +27,14 @@ TMP="$(mktemp)"
     fi
     echo '```'
   done
+  echo
+  echo "## fill (\`benchmarks/fill.sh\`: \`eval inpaint\` + \`benchmarks/peers/fill_peers.py\`)"
+  echo
+  echo '```'
+  if ! ./benchmarks/fill.sh 2>&1; then
+    echo "(benchmark fill failed)"
+  fi
+  echo '```'
 } > "$TMP"
 mv "$TMP" "$OUT"
 echo "wrote $OUT"

@@ -2,7 +2,7 @@
 # Installs the Python peers that `cargo bench --bench geometry` times against (make bench-deps).
 #
 # Idempotent: does nothing when the peers already import. Installs only what
-# benchmarks/requirements.txt lists (numpy, scipy, pykdtree, numba, open3d, with their own
+# benchmarks/requirements.txt lists (numpy, scipy, pykdtree, numba, open3d, opencv-python-headless, with their own
 # dependencies) plus Debian's libusb-1.0-0, which some open3d builds load at import.
 # PYTHON selects the interpreter (default python3).
 set -euo pipefail
@@ -10,7 +10,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 PYTHON="${PYTHON:-python3}"
 REQUIREMENTS="benchmarks/requirements.txt"
-CHECK='import numpy, scipy, pykdtree, numba, open3d'
+CHECK='import numpy, scipy, pykdtree, numba, open3d, cv2'
 VERSIONS='print("numpy", numpy.__version__, "numba", numba.__version__, "open3d", open3d.__version__)'
 
 die() {

@@ -113,7 +113,7 @@ fn the_inpainter_keeps_metric_depths_exactly_and_fills_the_holes() {
     let data: Vec<f32> = (0..w * h).map(|_| r.uniform_range(0.6, 4.0) as f32).collect();
     let known: Vec<bool> = (0..w * h).map(|_| r.uniform() < 0.5).collect();
     let d = DepthMap::new(w, h, data.clone()).unwrap();
-    let ctx = InpaintContext { intrinsics: Intrinsics::new(30.0, 30.0, 16.0, 12.0, w, h).unwrap(), seed: 4 };
+    let ctx = InpaintContext { intrinsics: Intrinsics::new(30.0, 30.0, 16.0, 12.0, w, h).unwrap(), seed: 4, t_target_from_source: Isometry3::identity() };
     let out = inpainter.inpaint(&d, &known, &ctx);
     for i in 0..(w * h) as usize {
         if known[i] {
@@ -139,7 +139,7 @@ fn a_view_gives_the_same_result_whichever_views_share_its_batch() {
             let mut r = Rng::new(100 + i);
             let d: Vec<f32> = (0..w * h).map(|_| r.uniform_range(0.6, 4.0) as f32).collect();
             let known: Vec<bool> = (0..w * h).map(|_| r.uniform() < 0.4).collect();
-            (DepthMap::new(w, h, d).unwrap(), known, InpaintContext { intrinsics: k, seed: 7 + i })
+            (DepthMap::new(w, h, d).unwrap(), known, InpaintContext { intrinsics: k, seed: 7 + i, t_target_from_source: Isometry3::identity() })
         })
         .collect();
     let v = |i: usize| (&views[i].0, views[i].1.as_slice(), &views[i].2);
@@ -459,27 +459,68 @@ fn eval_inpaint_on_real_frames_scores_every_method() {
     let dir = tempfile::tempdir().unwrap();
     let ckpt = save_untrained(dir.path(), 8);
     let text = eval_inpaint(&real, &dir.path().join("eval.csv"), &["--max-views", "3", "--steps", "2", "--diffusion", ckpt.to_str().unwrap()]);
+    let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
     let rows: Vec<Vec<String>> = text.lines().skip(1).map(|l| l.split(',').map(String::from).collect()).collect();
-    assert_eq!(rows.len(), 12, "{text}");
-    let get = |c: &str, f: &str, col: usize| -> f64 {
-        rows.iter().find(|r| r[0] == c && r[1].starts_with(f)).unwrap_or_else(|| panic!("{c}/{f}"))[col].parse().unwrap()
+    // 3 corrections x (none, push-pull, nearest, background, diffusion from noise, from push-pull, from background).
+    assert_eq!(rows.len(), 21, "{text}");
+    let get = |c: &str, f: &str, col: &str| -> f64 {
+        let i = header.iter().position(|h| *h == col).unwrap_or_else(|| panic!("no column {col}"));
+        rows.iter().find(|r| r[0] == c && r[1].starts_with(f)).unwrap_or_else(|| panic!("{c}/{f}"))[i].parse().unwrap()
     };
     for c in ["none", "min_pool", "unet@0.99"] {
-        assert_eq!(get(c, "none", 2), 3.0);
-        // No fill covers nothing; push-pull and diffusion fill nearly every unknown pixel the sensor saw.
-        assert_eq!(get(c, "none", 6), 0.0);
-        assert!(get(c, "push_pull", 6) > 0.9, "{text}");
-        assert!(get(c, "diffusion", 6) > 0.5, "{text}");
-        // The kept pixels do not depend on the fill.
-        assert_eq!(get(c, "none", 3), get(c, "diffusion", 3));
+        assert_eq!(get(c, "none", "views"), 3.0);
+        // No fill covers nothing; the classical fills and diffusion fill nearly every unknown pixel the sensor saw.
+        assert_eq!(get(c, "none", "fill_coverage"), 0.0);
+        for f in ["push_pull", "nearest", "background"] {
+            assert!(get(c, f, "fill_coverage") > 0.9, "{c}/{f}: {text}");
+        }
+        assert!(get(c, "diffusion", "fill_coverage") > 0.5, "{text}");
+        // The kept pixels and the holes do not depend on the fill.
+        assert_eq!(get(c, "none", "kept_per_map"), get(c, "diffusion", "kept_per_map"));
+        assert_eq!(get(c, "none", "unknown_share"), get(c, "background", "unknown_share"));
     }
     // Re-projection 10 frames apart with the stored poses: kept depths mostly right.
     for c in ["none", "min_pool"] {
-        assert!(get(c, "none", 5) < 0.05, "{text}");
+        assert!(get(c, "none", "kept_abs_rel") < 0.05, "{text}");
     }
-    // Corrections drop pixels, and the penetrations among them.
-    assert!(get("min_pool", "none", 3) < get("none", "none", 3));
-    assert!(get("min_pool", "none", 4) <= get("none", "none", 4));
+    // Corrections drop pixels, and the penetrations among them; the holes grow.
+    assert!(get("min_pool", "none", "kept_per_map") < get("none", "none", "kept_per_map"));
+    assert!(get("min_pool", "none", "wrong_kept_per_map") <= get("none", "none", "wrong_kept_per_map"));
+    assert!(get("min_pool", "none", "unknown_share") > get("none", "none", "unknown_share"));
+}
+
+#[test]
+fn eval_inpaint_scores_a_build_config_and_dumps_the_views_it_scored() {
+    let Some(real) = support::real_data() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let views = dir.path().join("views");
+    let config = "pipelines/paper-3dmatch-classical.toml";
+    let args = ["--max-views", "2", "--pipeline", config, "--dump-views", views.to_str().unwrap()];
+    let text = eval_inpaint(&real, &dir.path().join("eval.csv"), &args);
+    let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
+    let rows: Vec<Vec<&str>> = text.lines().skip(1).map(|l| l.split(',').collect()).collect();
+    // One row: the config's condition correction (min-pool) and its fill, named by the file.
+    assert_eq!(rows.len(), 1, "{text}");
+    assert_eq!((rows[0][0], rows[0][1]), ("min_pool", "paper-3dmatch-classical"));
+    let col = |name: &str| rows[0][header.iter().position(|h| *h == name).unwrap()].parse::<f64>().unwrap();
+    assert!(col("fill_coverage") > 0.9);
+    // The dumped masks are the views scored: their unknown share is the CSV's.
+    let folder = views.join("paper-3dmatch-classical").join("min_pool");
+    let meta: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(folder.join("views.json")).unwrap()).unwrap();
+    assert_eq!(meta["views"].as_array().unwrap().len(), 2);
+    let (mut unknown, mut pixels) = (0usize, 0usize);
+    for i in 0..2 {
+        let (w, h) = (meta["views"][i]["width"].as_u64().unwrap() as usize, meta["views"][i]["height"].as_u64().unwrap() as usize);
+        let mask = std::fs::read(folder.join(format!("{i:03}_known.npy"))).unwrap();
+        let header_len = u16::from_le_bytes([mask[8], mask[9]]) as usize;
+        assert_eq!(mask.len(), 10 + header_len + w * h);
+        unknown += mask[10 + header_len..].iter().filter(|b| **b == 0).count();
+        pixels += w * h;
+        for name in ["condition", "captured"] {
+            assert_eq!(std::fs::metadata(folder.join(format!("{i:03}_{name}.npy"))).unwrap().len() as usize, 10 + 118 + 4 * w * h);
+        }
+    }
+    assert!((unknown as f64 / pixels as f64 - col("unknown_share")).abs() < 1e-6, "{text}");
 }
 
 /// Filled-pixel (AbsRel, RMSE, delta < 1.25) of one `eval inpaint` row.
@@ -491,8 +532,8 @@ struct Fill {
 }
 
 /// `eval inpaint` on 4 held-out redkitchen views with a checkpoint started from the push-pull fill at
-/// `start_step`, `steps` deterministic steps: `(correction, fill) -> scores`, fill "push_pull" or "diffusion"
-/// (the push-pull-started row; a pure-noise row is left out).
+/// `start_step`, `steps` deterministic steps: `(correction, fill) -> scores`, fill "push_pull", "background"
+/// or "diffusion" (the push-pull-started row; the pure-noise and background-started rows are left out).
 fn fill_scores(real: &Path, checkpoint: &str, steps: usize, start_step: usize, dir: &Path) -> BTreeMap<(String, String), Fill> {
     let csv = dir.join(format!("{}-{steps}-{start_step}.csv", checkpoint.replace('/', "_")));
     let (steps, start) = (steps.to_string(), start_step.to_string());
@@ -501,10 +542,11 @@ fn fill_scores(real: &Path, checkpoint: &str, steps: usize, start_step: usize, d
     text.lines()
         .skip(1)
         .map(|l| l.split(',').collect::<Vec<_>>())
-        .filter(|r| r[1] == "push_pull" || r[1].contains("/pp"))
+        .filter(|r| ["push_pull", "background"].contains(&r[1]) || r[1].contains("/pp"))
         .map(|r| {
-            let fill = if r[1] == "push_pull" { "push_pull" } else { "diffusion" };
-            let f = Fill { abs_rel: r[7].parse().unwrap(), rmse: r[8].parse().unwrap(), delta: r[9].parse().unwrap() };
+            let fill = if r[1].contains("/pp") { "diffusion" } else { r[1] };
+            // Columns fill_abs_rel, fill_rmse_m, fill_delta_1_25.
+            let f = Fill { abs_rel: r[8].parse().unwrap(), rmse: r[9].parse().unwrap(), delta: r[10].parse().unwrap() };
             ((r[0].to_string(), fill.to_string()), f)
         })
         .collect()
@@ -531,6 +573,14 @@ fn the_shipped_fill_model_beats_push_pull_on_unseen_real_views_and_the_earlier_m
     assert!(d.rmse < 1.03 * pp.rmse, "min_pool: RMSE {} vs push-pull {}", d.rmse, pp.rmse);
     let (pp, d) = (at(&holes, "unet@0.99", "push_pull"), at(&holes, "unet@0.99", "diffusion"));
     assert!(d.abs_rel < 1.05 * pp.abs_rel, "unet: AbsRel {} vs push-pull {}", d.abs_rel, pp.abs_rel);
+    // The shipped default fill (background) beats push-pull and the hole-aware refiner on AbsRel, RMSE and
+    // delta without correction and with min-pool (docs/diffusion.md has the 30-view tables).
+    for c in ["none", "min_pool"] {
+        let (bg, pp, d) = (at(&holes, c, "background"), at(&holes, c, "push_pull"), at(&holes, c, "diffusion"));
+        for other in [pp, d] {
+            assert!(bg.abs_rel < 0.9 * other.abs_rel && bg.rmse < other.rmse && bg.delta > other.delta, "{c}: {bg:?} vs {other:?}");
+        }
+    }
     // The refine model (no holes in training) does not beat push-pull's AbsRel, nor the holes model's.
     for c in ["none", "min_pool", "unet@0.99"] {
         let (pp, r) = (at(&refine, c, "push_pull"), at(&refine, c, "diffusion"));
@@ -580,12 +630,12 @@ fn a_torchscript_denoiser_samples_like_the_native_one() {
     let data: Vec<f32> = (0..w * h).map(|_| r.uniform_range(0.6, 4.0) as f32).collect();
     let known: Vec<bool> = (0..w * h).map(|_| r.uniform() < 0.5).collect();
     let d = DepthMap::new(w, h, data.clone()).unwrap();
-    let ctx = InpaintContext { intrinsics: Intrinsics::new(30.0, 30.0, 16.0, 12.0, w, h).unwrap(), seed: 4 };
+    let ctx = InpaintContext { intrinsics: Intrinsics::new(30.0, 30.0, 16.0, 12.0, w, h).unwrap(), seed: 4, t_target_from_source: Isometry3::identity() };
     // The native network pads 24 rows to 24 (multiple of 8), TorchScript to 32: compare the TorchScript
     // output with a native run on the same 32x32 padding instead.
     let d32 = DepthMap::new(w, 32, data.iter().copied().chain(std::iter::repeat(0.0).take((w * 8) as usize)).collect()).unwrap();
     let known32: Vec<bool> = known.iter().copied().chain(std::iter::repeat(false).take((w * 8) as usize)).collect();
-    let ctx32 = InpaintContext { intrinsics: Intrinsics::new(30.0, 30.0, 16.0, 12.0, w, 32).unwrap(), seed: 4 };
+    let ctx32 = InpaintContext { intrinsics: Intrinsics::new(30.0, 30.0, 16.0, 12.0, w, 32).unwrap(), seed: 4, t_target_from_source: Isometry3::identity() };
     let a = native.inpaint(&d32, &known32, &ctx32);
     let b = scripted.inpaint(&d, &known, &ctx);
     for i in 0..(w * h) as usize {
@@ -665,7 +715,7 @@ fn a_push_pull_start_runs_exactly_the_configured_steps_and_refuses_more_than_it_
     let mut r = Rng::new(5);
     let d = DepthMap::new(w, h, (0..w * h).map(|_| r.uniform_range(0.6, 4.0) as f32).collect()).unwrap();
     let known: Vec<bool> = (0..w * h).map(|_| r.uniform() < 0.5).collect();
-    let ctx = InpaintContext { intrinsics: Intrinsics::new(15.0, 15.0, 8.0, 6.0, w, h).unwrap(), seed: 1 };
+    let ctx = InpaintContext { intrinsics: Intrinsics::new(15.0, 15.0, 8.0, 6.0, w, h).unwrap(), seed: 1, t_target_from_source: Isometry3::identity() };
     for (steps, want) in [(1, vec![4]), (3, vec![4, 2, 0]), (5, vec![4, 3, 2, 1, 0])] {
         config(steps).validate("inpaint").unwrap_or_else(|e| panic!("{steps} steps: {e}"));
         let calls = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));

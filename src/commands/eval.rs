@@ -29,9 +29,16 @@ pub enum EvalWhat {
 #[command(
     after_help = "For each selected frame j of each sequence: the frame's points (official working resolution, depth range and \
 crop box) are z-buffered into the stored camera of frame j+GAP, corrected (none, min-pool 3.75 cm, the correction U-Net at \
-tau_m 0.99), filled (none, push-pull, diffusion from pure noise as the authors, except for a network trained with --max-t; diffusion started from the noised push-pull fill) and compared with the depth captured at j+GAP, where valid. Kept pixels: \
-kept per map, wrong = more than 5 cm behind the captured surface (penetration) per map, AbsRel. Filled pixels (unknown after \
-correction, captured valid): coverage, AbsRel, RMSE, delta<1.25. The output correction of the build is not applied."
+tau_m 0.99), filled (none, push-pull, nearest valid pixel, background = the farther hole border along the epipolar \
+direction, diffusion from pure noise as the authors, except for a network trained with --max-t; diffusion started from the \
+noised push-pull or background fill) and compared with the depth captured at j+GAP, where valid. With --pipeline, only the condition \
+correction and the fill of each given build config are evaluated (the views use the first config's [working] section). \
+Columns: unknown = share of all view pixels unknown after correction (the hole size; a build's target views are 58-82% \
+unknown); wrong/m = kept pixels more than 5 cm behind the captured surface (penetration) per map; filled pixels (unknown \
+after correction, captured valid): coverage, AbsRel, RMSE, delta<1.25; the same three within 3 px of a captured depth \
+edge (edge); flying = share of filled pixels more than 5 cm from both the nearest and the farthest captured depth of their \
+3x3 neighbourhood; cloud = mean distance from the filled points to the captured cloud; ms/view = fill time. The output \
+correction of the build is not applied. --dump-views writes the views for benchmarks/peers/fill_peers.py."
 )]
 pub struct EvalInpaintArgs {
     /// Folder of depth sequences with poses (3DMatch / 7-Scenes / TUM / ScanNet layout).
@@ -54,7 +61,7 @@ pub struct EvalInpaintArgs {
     /// DDIM steps of the diffusion fill (at most --start-step + 1).
     #[arg(long, default_value_t = 50)]
     pub steps: usize,
-    /// The step the `push_pull`-started diffusion rows are noised to (the official rows start from pure noise).
+    /// The step the push-pull- and background-started diffusion rows are noised to (the official rows start from pure noise).
     #[arg(long, default_value_t = 500)]
     pub start_step: usize,
     /// RePaint-style resampling of the diffusion fill: blocks of this many DDIM steps (0: off) ...
@@ -81,6 +88,14 @@ pub struct EvalInpaintArgs {
     /// libtorch intra-op threads.
     #[arg(long, default_value_t = 1)]
     pub torch_threads: i32,
+    /// Evaluate exactly the condition correction and the fill of this build config instead of the built-in
+    /// rows (repeat to compare configs; rows are named by the file stem).
+    #[arg(long)]
+    pub pipeline: Vec<PathBuf>,
+    /// Also write every view (after each correction) to this folder: NNN_condition.npy, NNN_known.npy,
+    /// NNN_captured.npy (float32 metres / bool, H x W) and views.json (intrinsics, pose, depth range).
+    #[arg(long)]
+    pub dump_views: Option<PathBuf>,
 }
 
 #[derive(Debug, clap::Args)]
@@ -162,22 +177,34 @@ fn run_correction(a: &EvalCorrectionArgs, out: &mut dyn Write) -> Result<()> {
 
 fn run_inpaint(a: &EvalInpaintArgs, out: &mut dyn Write) -> Result<()> {
     use crate::correction::CorrectionConfig;
-    use crate::training::eval_inpaint::{evaluate, format_table, make_view, to_csv, NamedCorrector, NamedFill};
+    use crate::training::eval_inpaint::{dump_views, evaluate, format_table, make_view, to_csv, NamedCorrector, NamedFill};
     use crate::diffusion::sampler::Resample;
     use crate::inpainting::{DiffusionInpaintConfig, InpaintConfig, Start};
     use crate::nn::ModelPath;
-    use crate::stages::ingest::WorkingConfig;
     let w = |e: std::io::Error| Error::io("<stdout>", e);
     if a.gap == 0 || a.every == 0 {
         return Err(Error::config("--gap/--every", "must be at least 1"));
     }
     if a.steps > a.start_step + 1 {
         let most = a.start_step + 1;
-        let message = format!("the push_pull-started rows can run at most --start-step + 1 = {most} steps, not {}", a.steps);
+        let message = format!("the classically started rows can run at most --start-step + 1 = {most} steps, not {}", a.steps);
         return Err(Error::config("--steps", message));
     }
     crate::nn::set_torch_threads(a.torch_threads)?;
-    let working = WorkingConfig::default();
+    let pipelines = a
+        .pipeline
+        .iter()
+        .map(|p| {
+            let text = std::fs::read_to_string(p).map_err(|e| Error::io(p, e))?;
+            let origin = p.display().to_string();
+            let config = crate::pipeline::config::BuildConfig::from_toml(&text, &origin)?;
+            config.correct.validate()?;
+            config.inpaint.validate(&format!("{origin}: inpaint"))?;
+            let name = p.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or(origin);
+            Ok((name, config))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let working = pipelines.first().map(|(_, c)| c.working.clone()).unwrap_or_default();
     let mut views = Vec::new();
     for seq in crate::sources::open_sequences(&a.sequences, crate::sources::Layout::Auto)? {
         let mut taken = 0;
@@ -194,6 +221,9 @@ fn run_inpaint(a: &EvalInpaintArgs, out: &mut dyn Write) -> Result<()> {
     if views.is_empty() {
         return Err(Error::config("sequences", format!("no frame pair {} frames apart after --first {}", a.gap, a.first)));
     }
+    if !pipelines.is_empty() {
+        return run_pipelines(a, &pipelines, &views, &working, out);
+    }
     let mut corrections = vec![
         NamedCorrector { name: "none".into(), corrector: CorrectionConfig::None.build() },
         NamedCorrector { name: "min_pool".into(), corrector: CorrectionConfig::OFFICIAL_MIN_POOL.build() },
@@ -204,10 +234,17 @@ fn run_inpaint(a: &EvalInpaintArgs, out: &mut dyn Write) -> Result<()> {
     let mut fills = vec![
         NamedFill { name: "none".into(), inpainter: InpaintConfig::None.build()? },
         NamedFill { name: "push_pull".into(), inpainter: InpaintConfig::PushPull.build()? },
+        NamedFill { name: "nearest".into(), inpainter: InpaintConfig::Nearest.build()? },
+        NamedFill { name: "background".into(), inpainter: InpaintConfig::Background.build()? },
     ];
     // A network trained only on the nearly clean steps (`train diffusion --max-t`) has no pure-noise row.
     let low_steps_only = crate::diffusion::checkpoint::read_meta(&a.diffusion).ok().and_then(|m| m.trained_below_step()).is_some();
-    for (start, name) in [(Start::Noise, format!("diffusion{}", a.steps)), (Start::PushPull, format!("diff{}/pp{}", a.steps, a.start_step))] {
+    let started = [
+        (Start::Noise, format!("diffusion{}", a.steps)),
+        (Start::PushPull, format!("diff{}/pp{}", a.steps, a.start_step)),
+        (Start::Background, format!("diff{}/bg{}", a.steps, a.start_step)),
+    ];
+    for (start, name) in started {
         if start == Start::Noise && low_steps_only {
             continue;
         }
@@ -223,12 +260,53 @@ fn run_inpaint(a: &EvalInpaintArgs, out: &mut dyn Write) -> Result<()> {
         diffusion.validate("--diffusion")?;
         fills.push(NamedFill { name, inpainter: diffusion.build()? });
     }
+    let range = (working.depth_range[0], working.depth_range[1]);
+    if let Some(dir) = &a.dump_views {
+        dump_views(dir, &views, &corrections, range)?;
+    }
     writeln!(out, "{} views ({} frames apart) from {}", views.len(), a.gap, a.sequences.display()).map_err(w)?;
     let bar = crate::runtime::progress::bar(views.len() as u64, !a.quiet, "views");
-    let range = (working.depth_range[0], working.depth_range[1]);
     let rows = evaluate(&views, &corrections, &fills, range, || bar.inc(1));
     bar.finish_and_clear();
     report(out, &format_table(&rows), &to_csv(&rows), &a.out)
+}
+
+/// `eval inpaint --pipeline`: one row per build config, its condition correction and its fill.
+fn run_pipelines(
+    a: &EvalInpaintArgs,
+    pipelines: &[(String, crate::pipeline::config::BuildConfig)],
+    views: &[crate::training::eval_inpaint::View],
+    working: &crate::stages::ingest::WorkingConfig,
+    out: &mut dyn Write,
+) -> Result<()> {
+    use crate::training::eval_inpaint::{dump_views, evaluate, format_table, to_csv, MethodRow, NamedCorrector, NamedFill};
+    let w = |e: std::io::Error| Error::io("<stdout>", e);
+    let range = (working.depth_range[0], working.depth_range[1]);
+    writeln!(out, "{} views ({} frames apart) from {}", views.len(), a.gap, a.sequences.display()).map_err(w)?;
+    let bar = crate::runtime::progress::bar((views.len() * pipelines.len()) as u64, !a.quiet, "views");
+    let mut rows: Vec<MethodRow> = Vec::new();
+    for (name, config) in pipelines {
+        let condition = config.correct.condition;
+        let corrections = [NamedCorrector { name: correction_name(&condition), corrector: condition.build() }];
+        if let Some(dir) = &a.dump_views {
+            dump_views(&dir.join(name), views, &corrections, range)?;
+        }
+        let fills = [NamedFill { name: name.clone(), inpainter: config.inpaint.build()? }];
+        rows.extend(evaluate(views, &corrections, &fills, range, || bar.inc(1)));
+    }
+    bar.finish_and_clear();
+    report(out, &format_table(&rows), &to_csv(&rows), &a.out)
+}
+
+/// A correction's row name, as the built-in rows name them.
+fn correction_name(c: &crate::correction::CorrectionConfig) -> String {
+    use crate::correction::CorrectionConfig as C;
+    match c {
+        C::None => "none".into(),
+        C::MinPool { .. } => "min_pool".into(),
+        C::Median { .. } => "median".into(),
+        C::Unet { threshold, .. } => format!("unet@{threshold}"),
+    }
 }
 
 /// Prints the table and writes the CSV to `csv_path` (creating its folder).

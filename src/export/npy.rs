@@ -1,4 +1,5 @@
-//! NumPy `.npy` files (format version 1.0) of point clouds: float32 arrays of shape (N, 3).
+//! NumPy `.npy` files (format version 1.0): point clouds (float32 (N, 3)), depth images (float32 (H, W))
+//! and masks (bool (H, W)).
 
 use crate::error::{Error, Result};
 use crate::geometry::Point;
@@ -7,21 +8,44 @@ use std::path::Path;
 /// The `.npy` bytes of `points` as a little-endian float32 (N, 3) C-ordered array (what
 /// `np.save(path, np.asarray(points, np.float32))` writes).
 pub fn encode_npy_points(points: &[Point]) -> Vec<u8> {
-    let dict = format!("{{'descr': '<f4', 'fortran_order': False, 'shape': ({}, 3), }}", points.len());
-    // magic (6) + version (2) + header length (2) + dict + padding + '\n', a multiple of 64.
-    let unpadded = 10 + dict.len() + 1;
-    let header_len = dict.len() + 1 + (64 - unpadded % 64) % 64;
-    let mut out = Vec::with_capacity(10 + header_len + 12 * points.len());
-    out.extend_from_slice(b"\x93NUMPY\x01\x00");
-    out.extend_from_slice(&(header_len as u16).to_le_bytes());
-    out.extend_from_slice(dict.as_bytes());
-    out.resize(10 + header_len - 1, b' ');
-    out.push(b'\n');
+    let mut out = npy_header("<f4", &format!("({}, 3)", points.len()));
     for p in points {
         for v in [p.x, p.y, p.z] {
             out.extend_from_slice(&v.to_le_bytes());
         }
     }
+    out
+}
+
+/// The `.npy` bytes of a row-major `height`×`width` float32 image (`np.save` of a (H, W) `<f4` array).
+pub fn encode_npy_image_f32(width: usize, height: usize, data: &[f32]) -> Vec<u8> {
+    assert_eq!(data.len(), width * height, "image size");
+    let mut out = npy_header("<f4", &format!("({height}, {width})"));
+    data.iter().for_each(|v| out.extend_from_slice(&v.to_le_bytes()));
+    out
+}
+
+/// The `.npy` bytes of a row-major `height`×`width` boolean mask (`np.save` of a (H, W) `bool` array).
+pub fn encode_npy_mask(width: usize, height: usize, mask: &[bool]) -> Vec<u8> {
+    assert_eq!(mask.len(), width * height, "mask size");
+    let mut out = npy_header("|b1", &format!("({height}, {width})"));
+    out.extend(mask.iter().map(|b| *b as u8));
+    out
+}
+
+/// Magic, version 1.0, header length and the header dict padded with spaces and a newline so the data
+/// starts at a multiple of 64 bytes.
+fn npy_header(descr: &str, shape: &str) -> Vec<u8> {
+    let dict = format!("{{'descr': '{descr}', 'fortran_order': False, 'shape': {shape}, }}");
+    // magic (6) + version (2) + header length (2) + dict + padding + '\n', a multiple of 64.
+    let unpadded = 10 + dict.len() + 1;
+    let header_len = dict.len() + 1 + (64 - unpadded % 64) % 64;
+    let mut out = Vec::with_capacity(10 + header_len);
+    out.extend_from_slice(b"\x93NUMPY\x01\x00");
+    out.extend_from_slice(&(header_len as u16).to_le_bytes());
+    out.extend_from_slice(dict.as_bytes());
+    out.resize(10 + header_len - 1, b' ');
+    out.push(b'\n');
     out
 }
 
@@ -78,5 +102,21 @@ mod tests {
         let p = dir.path().join("a/b.npy");
         write_npy_points(&p, &pts).unwrap();
         assert_eq!(read_npy_points(&p).unwrap(), pts);
+    }
+
+    #[test]
+    fn images_and_masks_are_what_numpy_saves() {
+        // The bytes numpy 2.2 writes for np.save(np.arange(6, dtype=np.float32).reshape(2, 3) * 0.5) and
+        // for np.save(np.array([[True, False, True], [False, False, True]])).
+        let pad = |dict: &str| format!("{dict}{}\n", " ".repeat(128 - 10 - dict.len() - 1));
+        let image = encode_npy_image_f32(3, 2, &[0.0, 0.5, 1.0, 1.5, 2.0, 2.5]);
+        let dict = pad("{'descr': '<f4', 'fortran_order': False, 'shape': (2, 3), }");
+        let mut want = [&b"\x93NUMPY\x01\x00v\x00"[..], dict.as_bytes()].concat();
+        [0.0f32, 0.5, 1.0, 1.5, 2.0, 2.5].iter().for_each(|v| want.extend_from_slice(&v.to_le_bytes()));
+        assert_eq!(image, want);
+        let mask = encode_npy_mask(3, 2, &[true, false, true, false, false, true]);
+        let dict = pad("{'descr': '|b1', 'fortran_order': False, 'shape': (2, 3), }");
+        let want = [&b"\x93NUMPY\x01\x00v\x00"[..], dict.as_bytes(), &[1, 0, 1, 0, 0, 1]].concat();
+        assert_eq!(mask, want);
     }
 }

@@ -1,4 +1,5 @@
-//! Pure geometry: intrinsics, depth maps, SE(3) poses, z-buffer projection, crops, voxels, overlap.
+//! Pure geometry: intrinsics, depth maps, SE(3) poses, z-buffer projection, crops, voxels, overlap,
+//! nearest-neighbour distances.
 //!
 //! Units: metres (`f32` for points and depth, `f64` for poses and intrinsics). Pixel convention (the
 //! official code's): pixel (column c, row r) has the integer coordinate (c, r), so a point projects to
@@ -8,6 +9,7 @@ pub mod crop;
 pub mod depth;
 pub mod depth_filters;
 pub mod intrinsics;
+pub mod kdtree;
 pub mod overlap;
 pub mod overlap_estimate;
 pub mod pose;
@@ -19,6 +21,7 @@ pub use crop::AxisBox;
 pub use depth::{backproject, backproject_with_pixels, DepthMap, DepthRange};
 pub use depth_filters::valid_min3x3;
 pub use intrinsics::{Intrinsics, ResizeCrop};
+pub use kdtree::KdTree;
 pub use overlap::{overlap, Overlap, RadiusIndex};
 pub use overlap_estimate::view_overlap;
 pub use pose::{pose_from_rows, pose_to_rows, relative_pose, transform_points};

@@ -1,7 +1,7 @@
 //! `InpaintConfig`: the inpainting methods a pipeline config can name (the `[inpaint]` section), their
 //! checks and the inpainter each builds.
 
-use super::{DiffusionInpaintConfig, DiffusionInpainter, Inpainter, NoInpainting, PushPull};
+use super::{Background, DiffusionInpaintConfig, DiffusionInpainter, Inpainter, Nearest, NoInpainting, PushPull};
 use serde::{Deserialize, Serialize};
 
 /// The inpainting methods a pipeline config can name.
@@ -10,8 +10,13 @@ use serde::{Deserialize, Serialize};
 pub enum InpaintConfig {
     /// No filling: the target keeps only the re-projected pixels.
     None,
-    /// Classical push–pull pyramid fill (smooth, fast).
+    /// Classical push–pull pyramid fill (smooth, fast; blends the two sides of a depth edge).
     PushPull,
+    /// Copies the nearest known pixel (exact Euclidean distance).
+    Nearest,
+    /// Occlusion-aware: copies the farther of the two hole borders along the epipolar direction of the
+    /// camera motion (the uncovered background of a disocclusion).
+    Background,
     /// The diffusion model with the exact range–null-space step (paper §3.2, reference §5.4).
     Diffusion(DiffusionInpaintConfig),
 }
@@ -38,6 +43,8 @@ impl InpaintConfig {
         Ok(match self {
             InpaintConfig::None => Box::new(NoInpainting),
             InpaintConfig::PushPull => Box::new(PushPull),
+            InpaintConfig::Nearest => Box::new(Nearest),
+            InpaintConfig::Background => Box::new(Background),
             InpaintConfig::Diffusion(c) => Box::new(DiffusionInpainter::load(c, tch::Device::Cpu)?),
         })
     }

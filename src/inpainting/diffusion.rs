@@ -1,7 +1,7 @@
 //! The diffusion inpainter: the trained denoiser sampled with DDIM and the range–null-space step
 //! ([`crate::diffusion::sampler`]), so the known pixels of the output are the input's.
 
-use super::{InpaintContext, Inpainter, PushPull};
+use super::{Background, InpaintContext, Inpainter, PushPull};
 use crate::nn::space::{from_network, to_network};
 use crate::diffusion::sampler::{ddnm_sample, Problem, Resample, SamplerOptions};
 use crate::diffusion::schedule::Schedule;
@@ -27,8 +27,9 @@ pub struct DiffusionInpaintConfig {
     /// DDIM η (official 1.0).
     #[serde(default = "official_eta")]
     pub eta: f64,
-    /// Where the chain starts: `noise` (official: pure noise at step 999) or `push_pull` (the known
-    /// pixels and a push–pull fill, noised to `start_step`; see `docs/diffusion.md` for the measurement).
+    /// Where the chain starts: `noise` (official: pure noise at step 999), `push_pull` or `background`
+    /// (the known pixels and that classical fill, noised to `start_step`; see `docs/diffusion.md` for the
+    /// measurement).
     #[serde(default)]
     pub start: Start,
     /// The step a `push_pull` start is noised to (0..=999).
@@ -62,6 +63,8 @@ pub enum Start {
     Noise,
     /// The known pixels and a push–pull fill, noised to `start_step`.
     PushPull,
+    /// The known pixels and the background fill ([`Background`]), noised to `start_step`.
+    Background,
 }
 
 fn official_eta() -> f64 {
@@ -84,11 +87,11 @@ impl DiffusionInpaintConfig {
             return Err(Error::config(field, "start_step must be in 0..=999"));
         }
         // From step s the chain has s + 1 distinct steps left (s, s − 1, …, 0); more would repeat steps.
-        if self.start == Start::PushPull && self.steps > self.start_step + 1 {
+        if self.start != Start::Noise && self.steps > self.start_step + 1 {
             return Err(Error::config(
                 field,
                 format!(
-                    "steps = {} is more than a push_pull start at start_step = {} can run: at most start_step + 1 = {} \
+                    "steps = {} is more than a classical start at start_step = {} can run: at most start_step + 1 = {} \
                      steps (lower steps or raise start_step)",
                     self.steps,
                     self.start_step,
@@ -114,7 +117,7 @@ impl DiffusionInpaintConfig {
                 field,
                 format!(
                     "checkpoint `{}` was trained only on time steps below {cap} (--max-t): sample it with \
-                     start = \"push_pull\" and start_step < {cap}",
+                     start = \"push_pull\" or \"background\" and start_step < {cap}",
                     self.checkpoint
                 ),
             )),
@@ -123,7 +126,7 @@ impl DiffusionInpaintConfig {
     }
 
     pub fn sampler(&self) -> SamplerOptions {
-        let start_step = (self.start == Start::PushPull).then_some(self.start_step);
+        let start_step = (self.start != Start::Noise).then_some(self.start_step);
         SamplerOptions { steps: self.steps, eta: self.eta, start_step, resample: self.resample }
     }
 }
@@ -136,12 +139,14 @@ pub struct DiffusionInpainter {
     device: Device,
     /// Views per forward pass; short batches are padded to it.
     batch: usize,
+    /// The classical fill a chain with a start step starts from.
+    start: Start,
 }
 
 impl DiffusionInpainter {
     pub fn load(config: &DiffusionInpaintConfig, device: Device) -> Result<Self> {
         let model = load_model(config.checkpoint.as_path(), device)?;
-        Ok(Self::from_model(model, config.sampler(), device).with_batch(config.batch))
+        Ok(Self::from_model(model, config.sampler(), device).with_batch(config.batch).with_start(config.start))
     }
 
     /// Wraps a network whose variables live in `vs`.
@@ -152,7 +157,16 @@ impl DiffusionInpainter {
 
     /// Wraps any x0 predictor on `device`.
     pub fn from_model(model: Box<dyn X0Model>, sampler: SamplerOptions, device: Device) -> Self {
-        DiffusionInpainter { model: Mutex::new(model), schedule: Schedule::official(), sampler, device, batch: 1 }
+        DiffusionInpainter { model: Mutex::new(model), schedule: Schedule::official(), sampler, device, batch: 1, start: Start::PushPull }
+    }
+
+    /// Starts a chain with a start step from `start`'s classical fill (push–pull unless told; `noise`
+    /// leaves it at push–pull, which only a start step uses).
+    pub fn with_start(mut self, start: Start) -> Self {
+        if start != Start::Noise {
+            self.start = start;
+        }
+        self
     }
 
     /// Runs every forward pass with `batch` views.
@@ -175,12 +189,13 @@ impl DiffusionInpainter {
             .iter()
             .map(|(d, known, _)| d.data().iter().zip(known.iter()).map(|(z, k)| *k && to_network(*z) > -1.0).collect())
             .collect();
-        // The classical fill a `push_pull` start noises (in network space).
+        // The classical fill a start step noises (in network space).
+        let classical: &dyn Inpainter = if self.start == Start::Background { &Background } else { &PushPull };
         let inits: Vec<Vec<f32>> = match self.sampler.start_step {
             None => Vec::new(),
             Some(_) => views
                 .iter()
-                .map(|(d, known, ctx)| PushPull.inpaint(d, known, ctx).data().iter().map(|z| to_network(*z)).collect())
+                .map(|(d, known, ctx)| classical.inpaint(d, known, ctx).data().iter().map(|z| to_network(*z)).collect())
                 .collect(),
         };
         let problems: Vec<Problem<'_>> = views

@@ -71,7 +71,7 @@ fn default_shard_size() -> u64 {
     64
 }
 fn default_inpaint() -> InpaintConfig {
-    InpaintConfig::PushPull
+    InpaintConfig::Background
 }
 
 impl BuildConfig {

@@ -26,7 +26,11 @@ impl Stage<PairUnit> for Inpaint {
     fn process_batch(&mut self, units: &mut [PairUnit]) -> Result<()> {
         let contexts: Vec<InpaintContext> = units
             .iter()
-            .map(|u| InpaintContext { intrinsics: u.k.expect("ingest sets the intrinsics"), seed: noise_seed(u.seed, 0) })
+            .map(|u| InpaintContext {
+                intrinsics: u.k.expect("ingest sets the intrinsics"),
+                seed: noise_seed(u.seed, 0),
+                t_target_from_source: u.t_target_from_source,
+            })
             .collect();
         let views: Vec<_> = units
             .iter()

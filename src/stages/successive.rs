@@ -116,7 +116,7 @@ impl Successive {
         let proj = project_zbuffer(memory, t, k, false);
         let (mut condition, mut known) = (proj.depth, proj.known);
         correct_condition(self.condition.as_ref(), &mut condition, &mut known);
-        let mut depth = self.inpainter.inpaint(&condition, &known, &InpaintContext { intrinsics: *k, seed });
+        let mut depth = self.inpainter.inpaint(&condition, &known, &InpaintContext { intrinsics: *k, seed, t_target_from_source: *t });
         correct_output(self.output.as_ref(), &mut depth);
         depth
     }

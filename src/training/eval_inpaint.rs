@@ -1,11 +1,8 @@
 //! Realism of the target views on real sequences (`pointreggpt eval inpaint`): re-project frame j into the
 //! stored pose of frame j + K, correct, fill, and compare with the depth captured at j + K.
 //!
-//! Two groups of pixels are scored against the captured depth (where it is valid):
-//! - kept: re-projected pixels that survive correction. A kept depth more than [`PENETRATION_M`] behind the
-//!   captured surface is a penetration error (a background point seen through a foreground hole);
-//! - filled: pixels the re-projection left unknown and the fill gave a depth: AbsRel, RMSE, δ < 1.25, and
-//!   the coverage (filled share of the unknown pixels the sensor saw).
+//! The scores are [`crate::training::fill_metrics`]'s; [`dump_views`] writes the views as `.npy` files so
+//! an outside fill (`benchmarks/peers/fill_peers.py`) is scored on exactly the same pixels.
 
 use crate::correction::{apply_keep_mask, Corrector};
 use crate::error::{Error, Result};
@@ -13,10 +10,10 @@ use crate::geometry::{backproject, project_zbuffer, DepthMap, Intrinsics};
 use crate::inpainting::{InpaintContext, Inpainter};
 use crate::stages::ingest::WorkingConfig;
 use crate::sources::Frame;
-use serde::Serialize;
-
-/// A kept depth this far behind the captured one is a penetration error (the official τ_gt).
-pub const PENETRATION_M: f32 = 0.05;
+pub use crate::training::fill_metrics::FillScores;
+use nalgebra::Isometry3;
+use std::path::Path;
+use std::time::Instant;
 
 /// One evaluation view: the condition re-projected from frame j into frame j + K's camera, and the depth
 /// captured there, at the working resolution.
@@ -27,6 +24,8 @@ pub struct View {
     pub captured: DepthMap,
     pub intrinsics: Intrinsics,
     pub seed: u64,
+    /// The target camera from the source camera (the stored poses).
+    pub t_target_from_source: Isometry3<f64>,
 }
 
 /// The view of `source` seen from `target`'s stored pose (both frames need poses).
@@ -37,73 +36,8 @@ pub fn make_view(source: &Frame, target: &Frame, working: &WorkingConfig, seed: 
     let (captured, _) = working.map_frame(target)?;
     let memory = working.crop_box.crop(&backproject(&depth, &k, working.depth_range()));
     let proj = project_zbuffer(&memory, &t, &k, false);
-    Ok(View { key: format!("{} -> {}", source.key, target.key), condition: proj.depth, known: proj.known, captured, intrinsics: k, seed })
-}
-
-/// Sums of one (correction, fill) method over views.
-#[derive(Clone, Debug, Default, Serialize)]
-pub struct FillScores {
-    pub views: u64,
-    pub kept: u64,
-    pub kept_wrong: u64,
-    kept_abs_rel: f64,
-    /// Unknown pixels (after correction) where the sensor has depth.
-    pub unknown: u64,
-    pub filled: u64,
-    abs_rel: f64,
-    sq: f64,
-    delta_ok: u64,
-}
-
-impl FillScores {
-    /// Adds one view: `known` after correction, `filled` the fill's output.
-    pub fn add(&mut self, known: &[bool], filled: &DepthMap, captured: &DepthMap, range: (f32, f32)) {
-        self.views += 1;
-        let valid = |z: f32| z > range.0 && z < range.1;
-        for ((k, z), g) in known.iter().zip(filled.data()).zip(captured.data()) {
-            if !valid(*g) {
-                continue;
-            }
-            if *k {
-                if *z > 0.0 {
-                    self.kept += 1;
-                    self.kept_wrong += (*z - *g > PENETRATION_M) as u64;
-                    self.kept_abs_rel += ((*z - *g).abs() / *g) as f64;
-                }
-            } else {
-                self.unknown += 1;
-                if valid(*z) {
-                    self.filled += 1;
-                    let (z, g) = (*z as f64, *g as f64);
-                    self.abs_rel += (z - g).abs() / g;
-                    self.sq += (z - g) * (z - g);
-                    self.delta_ok += ((z / g).max(g / z) < 1.25) as u64;
-                }
-            }
-        }
-    }
-
-    pub fn kept_per_view(&self) -> f64 {
-        self.kept as f64 / self.views.max(1) as f64
-    }
-    pub fn wrong_kept_per_view(&self) -> f64 {
-        self.kept_wrong as f64 / self.views.max(1) as f64
-    }
-    pub fn kept_abs_rel(&self) -> f64 {
-        self.kept_abs_rel / self.kept.max(1) as f64
-    }
-    pub fn coverage(&self) -> f64 {
-        self.filled as f64 / self.unknown.max(1) as f64
-    }
-    pub fn abs_rel(&self) -> f64 {
-        self.abs_rel / self.filled.max(1) as f64
-    }
-    pub fn rmse(&self) -> f64 {
-        (self.sq / self.filled.max(1) as f64).sqrt()
-    }
-    pub fn delta(&self) -> f64 {
-        self.delta_ok as f64 / self.filled.max(1) as f64
-    }
+    let key = format!("{} -> {}", source.key, target.key);
+    Ok(View { key, condition: proj.depth, known: proj.known, captured, intrinsics: k, seed, t_target_from_source: t })
 }
 
 /// One row of the comparison.
@@ -136,10 +70,13 @@ pub fn evaluate(views: &[View], corrections: &[NamedCorrector], fills: &[NamedFi
             let (mut condition, mut known) = (v.condition.clone(), v.known.clone());
             let keep = c.corrector.keep_mask(&condition);
             apply_keep_mask(&mut condition, &mut known, &keep);
-            let ctx = InpaintContext { intrinsics: v.intrinsics, seed: v.seed };
+            let ctx = InpaintContext { intrinsics: v.intrinsics, seed: v.seed, t_target_from_source: v.t_target_from_source };
             for (fi, f) in fills.iter().enumerate() {
+                let clock = Instant::now();
                 let out = f.inpainter.inpaint(&condition, &known, &ctx);
-                rows[ci * fills.len() + fi].scores.add(&known, &out, &v.captured, range);
+                let scores = &mut rows[ci * fills.len() + fi].scores;
+                scores.fill_ns += clock.elapsed().as_nanos();
+                scores.add(&known, &out, &v.captured, &v.intrinsics, range);
             }
         }
         on_view();
@@ -150,23 +87,28 @@ pub fn evaluate(views: &[View], corrections: &[NamedCorrector], fills: &[NamedFi
 /// The rows as an aligned table.
 pub fn format_table(rows: &[MethodRow]) -> String {
     let mut s = format!(
-        "{:<12} {:<14} {:>6} {:>9} {:>11} {:>10} {:>9} {:>9} {:>8} {:>9}\n",
-        "correction", "fill", "views", "kept/map", "wrong/map", "kept AbsR", "coverage", "AbsRel", "RMSE m", "d<1.25"
+        "{:<10} {:<16} {:>5} {:>8} {:>8} {:>9} {:>8} {:>7} {:>7} {:>8} {:>7} {:>7} {:>7} {:>8} {:>8}\n",
+        "correction", "fill", "views", "unknown", "wrong/m", "coverage", "AbsRel", "RMSE m", "d<1.25", "edge AR", "edge RM", "edge d", "flying", "cloud cm", "ms/view"
     );
     for r in rows {
         let c = &r.scores;
         s += &format!(
-            "{:<12} {:<14} {:>6} {:>9.0} {:>11.1} {:>10.4} {:>8.1}% {:>9.4} {:>8.4} {:>8.1}%\n",
+            "{:<10} {:<16} {:>5} {:>7.1}% {:>8.1} {:>8.1}% {:>8.4} {:>7.3} {:>6.1}% {:>8.4} {:>7.3} {:>6.1}% {:>6.1}% {:>8.2} {:>8.1}\n",
             r.correction,
             r.fill,
             c.views,
-            c.kept_per_view(),
+            100.0 * c.unknown_share(),
             c.wrong_kept_per_view(),
-            c.kept_abs_rel(),
             100.0 * c.coverage(),
-            c.abs_rel(),
-            c.rmse(),
-            100.0 * c.delta()
+            c.filled.abs_rel(),
+            c.filled.rmse(),
+            100.0 * c.filled.delta(),
+            c.band.abs_rel(),
+            c.band.rmse(),
+            100.0 * c.band.delta(),
+            100.0 * c.flying_share(),
+            100.0 * c.cloud_distance_m(),
+            c.ms_per_view()
         );
     }
     s
@@ -174,43 +116,70 @@ pub fn format_table(rows: &[MethodRow]) -> String {
 
 /// The rows as CSV.
 pub fn to_csv(rows: &[MethodRow]) -> String {
-    let mut s = String::from("correction,fill,views,kept_per_map,wrong_kept_per_map,kept_abs_rel,fill_coverage,fill_abs_rel,fill_rmse_m,fill_delta_1_25\n");
+    let mut s = String::from(
+        "correction,fill,views,unknown_share,kept_per_map,wrong_kept_per_map,kept_abs_rel,fill_coverage,fill_abs_rel,fill_rmse_m,\
+         fill_delta_1_25,edge_abs_rel,edge_rmse_m,edge_delta_1_25,flying_share,cloud_distance_m,ms_per_view\n",
+    );
     for r in rows {
         let c = &r.scores;
         s += &format!(
-            "{},{},{},{:.3},{:.3},{:.6},{:.6},{:.6},{:.6},{:.6}\n",
+            "{},{},{},{:.6},{:.3},{:.3},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.3}\n",
             r.correction,
             r.fill,
             c.views,
+            c.unknown_share(),
             c.kept_per_view(),
             c.wrong_kept_per_view(),
             c.kept_abs_rel(),
             c.coverage(),
-            c.abs_rel(),
-            c.rmse(),
-            c.delta()
+            c.filled.abs_rel(),
+            c.filled.rmse(),
+            c.filled.delta(),
+            c.band.abs_rel(),
+            c.band.rmse(),
+            c.band.delta(),
+            c.flying_share(),
+            c.cloud_distance_m(),
+            c.ms_per_view()
         );
     }
     s
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn scores_count_penetrations_and_fill_errors_by_hand() {
-        // 4 pixels: kept right, kept 10 cm too far (penetration), unknown filled 10% too near, unknown empty.
-        let captured = DepthMap::new(4, 1, vec![2.0, 2.0, 2.0, 2.0]).unwrap();
-        let filled = DepthMap::new(4, 1, vec![2.0, 2.1, 1.8, 0.0]).unwrap();
-        let known = [true, true, false, false];
-        let mut s = FillScores::default();
-        s.add(&known, &filled, &captured, (0.5, 10.0));
-        assert_eq!((s.kept, s.kept_wrong, s.unknown, s.filled), (2, 1, 2, 1));
-        assert!((s.kept_abs_rel() - 0.025).abs() < 1e-6);
-        assert!((s.coverage() - 0.5).abs() < 1e-12);
-        assert!((s.abs_rel() - 0.1).abs() < 1e-6);
-        assert!((s.rmse() - 0.2).abs() < 1e-6);
-        assert_eq!(s.delta(), 1.0);
+/// Writes every view as seen after each correction, for outside fills: `DIR/<correction>/NNN_condition.npy`
+/// (float32 metres, 0 where unknown), `NNN_known.npy` (bool) and `NNN_captured.npy` (float32 metres), all
+/// (H, W), and `DIR/<correction>/views.json` with each view's key, intrinsics, target-from-source pose
+/// (row-major 4×4) and the valid depth range.
+pub fn dump_views(dir: &Path, views: &[View], corrections: &[NamedCorrector], range: (f32, f32)) -> Result<()> {
+    use crate::export::npy::{encode_npy_image_f32, encode_npy_mask};
+    for c in corrections {
+        let sub = dir.join(&c.name);
+        std::fs::create_dir_all(&sub).map_err(|e| Error::io(&sub, e))?;
+        let mut index = Vec::new();
+        for (i, v) in views.iter().enumerate() {
+            let (mut condition, mut known) = (v.condition.clone(), v.known.clone());
+            let keep = c.corrector.keep_mask(&condition);
+            apply_keep_mask(&mut condition, &mut known, &keep);
+            let (w, h) = (v.condition.width() as usize, v.condition.height() as usize);
+            let write = |name: &str, bytes: Vec<u8>| {
+                let path = sub.join(format!("{i:03}_{name}.npy"));
+                std::fs::write(&path, bytes).map_err(|e| Error::io(&path, e))
+            };
+            let masked: Vec<f32> = condition.data().iter().zip(&known).map(|(z, k)| if *k { *z } else { 0.0 }).collect();
+            write("condition", encode_npy_image_f32(w, h, &masked))?;
+            write("known", encode_npy_mask(w, h, &known))?;
+            write("captured", encode_npy_image_f32(w, h, v.captured.data()))?;
+            let k = &v.intrinsics;
+            index.push(serde_json::json!({
+                "index": i, "key": v.key, "width": w, "height": h,
+                "fx": k.fx, "fy": k.fy, "cx": k.cx, "cy": k.cy,
+                "t_target_from_source": v.t_target_from_source.to_homogeneous().transpose().as_slice().to_vec(),
+            }));
+        }
+        let meta = serde_json::json!({ "correction": c.name, "depth_range": [range.0, range.1], "views": index });
+        let path = sub.join("views.json");
+        let text = serde_json::to_string_pretty(&meta).map_err(|e| Error::InvalidArgument(e.to_string()))?;
+        std::fs::write(&path, text).map_err(|e| Error::io(&path, e))?;
     }
+    Ok(())
 }

@@ -9,3 +9,4 @@ pub mod correction;
 pub mod descriptor;
 pub mod diffusion;
 pub mod eval_inpaint;
+pub mod fill_metrics;

@@ -72,7 +72,7 @@ pub fn holed_frame(
     let RoundTrip { mut depth, mut known } = round_trip(&depth, &k, t_moved_from_camera);
     let keep = correct.keep_mask(&depth);
     apply_keep_mask(&mut depth, &mut known, &keep);
-    let filled = PushPull.inpaint(&depth, &known, &InpaintContext { intrinsics: k, seed: 0 });
+    let filled = PushPull.inpaint(&depth, &known, &InpaintContext { intrinsics: k, seed: 0, t_target_from_source: t_moved_from_camera.inverse() });
     HoledFrame { start: filled.data().iter().map(|z| to_network(*z)).collect(), holes: known.iter().map(|k| !k).collect() }
 }
 
