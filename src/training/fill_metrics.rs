@@ -15,7 +15,8 @@
 //!
 //! `benchmarks/peers/fill_peers.py` computes the same definitions independently for outside methods.
 
-use crate::geometry::{DepthMap, Intrinsics, KdTree, Point};
+use crate::geometry::{DepthMap, Intrinsics, Point};
+use crate::registration::KdTree;
 use serde::Serialize;
 
 /// A kept depth this far behind the captured one is a penetration error (the official τ_gt).
@@ -115,9 +116,9 @@ impl FillScores {
             self.flying += ((z - fg).abs() > FLYING_M && (z - bg).abs() > FLYING_M) as u64;
             let tree = cloud.get_or_insert_with(|| {
                 let pts: Vec<Point> = (0..w * h).filter(|i| valid(g[*i])).map(|i| Point::from(point(i, g[i]))).collect();
-                KdTree::new(&pts)
+                KdTree::from_points(&pts)
             });
-            self.cloud_m += tree.nearest_distance(point(j, z)) as f64;
+            self.cloud_m += tree.nearest(&point(j, z)).map_or(f32::INFINITY, |(_, d2)| d2.sqrt()) as f64;
         }
     }
 
