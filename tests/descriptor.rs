@@ -29,7 +29,7 @@ fn dataset(dir: &Path, name: &str, first_seed: u64) -> PathBuf {
 
 fn train(data: &Path, out: &Path, steps: u64, extra: &[&str]) -> std::process::Output {
     bin()
-        .args(["train", "descriptor", "--data", data.to_str().unwrap(), "--out", out.to_str().unwrap(), "--quiet", "--points", "32"])
+        .args(["train", "descriptor", "--data", data.to_str().unwrap(), "--out", out.to_str().unwrap(), "--quiet"])
         .args(["--steps", &steps.to_string(), "--checkpoint-every", "10"])
         .args(extra)
         .output()
@@ -60,15 +60,15 @@ fn training_lowers_the_loss_and_matches_unseen_pairs_better_than_the_untrained_n
     let dir = tempfile::tempdir().unwrap();
     let (train_set, held_out) = (dataset(dir.path(), "train", 11), dataset(dir.path(), "held", 100));
     let run = dir.path().join("run");
-    let o = train(&train_set, &run, 60, &[]);
+    let o = train(&train_set, &run, 120, &[]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let log: Vec<serde_json::Value> = std::fs::read_to_string(run.join("loss.jsonl")).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect();
     let (first, last) = (&log[0], &log[log.len() - 1]);
-    assert_eq!(last["step"], 60);
+    assert_eq!(last["step"], 120);
     assert!(last["loss"].as_f64().unwrap() < 0.9 * first["loss"].as_f64().unwrap(), "{first} -> {last}");
 
     let trained = LearnedDescriptor::load(&run.join("latest.safetensors")).unwrap();
-    assert_eq!(trained.meta.step, 60);
+    assert_eq!(trained.meta.step, 120);
     let pairs = load_pairs(&[held_out]).unwrap();
     tch::manual_seed(0);
     let vs = tch::nn::VarStore::new(tch::Device::Cpu);
@@ -78,6 +78,32 @@ fn training_lowers_the_loss_and_matches_unseen_pairs_better_than_the_untrained_n
     let before = matching_rate(&pairs, |c, k| describe_with(&untrained, &patch, c, k), 32);
     eprintln!("held-out matching rate: untrained {:.3}, trained {:.3}", before, after);
     assert!(after > before + 0.05, "untrained {before:.3}, trained {after:.3}");
+
+    // The checkpoint is a `--descriptor` of `eval registration`: scored on the same single-frame pairs of
+    // an unseen synthetic sequence as raw FPFH. (At this budget it does not beat FPFH yet: 6.4 % vs 6.6 %
+    // IR; docs/registration.md has the numbers. The test checks the wiring: the same pairs, a real IR.)
+    let seq = dir.path().join("seq");
+    let bench = dir.path().join("bench");
+    let run_ok = |args: &[&str]| {
+        let o = bin().args(args).output().unwrap();
+        assert!(o.status.success(), "{args:?}: {}", String::from_utf8_lossy(&o.stderr));
+        String::from_utf8_lossy(&o.stdout).into_owned()
+    };
+    run_ok(&["synth", "--out", seq.to_str().unwrap(), "--frames", "40", "--seed", "200"]);
+    run_ok(&["fragments", seq.join("synthetic-200").to_str().unwrap(), "--single-frames", "--out", bench.to_str().unwrap(), "--quiet"]);
+    let checkpoint = run.join("latest.safetensors");
+    let csv = run_ok(&["eval", "registration", bench.to_str().unwrap(), "--descriptor", checkpoint.to_str().unwrap(), "--compare", "fpfh", "--samples", "500", "--csv"]);
+    let row = |name: &str| -> Vec<String> {
+        let line = csv.lines().find(|l| l.starts_with(&format!("single-frame,{name},500,"))).unwrap_or_else(|| panic!("no row for {name}: {csv}"));
+        line.split(',').map(str::to_string).collect()
+    };
+    let (learned, fpfh) = (row(checkpoint.to_str().unwrap()), row("fpfh:0.125"));
+    assert_eq!(learned[3], fpfh[3], "the same pairs");
+    assert!(learned[3].parse::<usize>().unwrap() >= 5, "{csv}");
+    let ir: f64 = learned[5].parse().unwrap();
+    assert!(ir > 1.0 && ir <= 100.0, "{csv}");
+    assert!(csv.contains("ir_diff_pp"), "the paired comparison: {csv}");
+    eprintln!("held-out synthetic single-frame pairs, IR at 500 samples: learned {} %, FPFH {} %", learned[5], fpfh[5]);
 }
 
 #[test]
@@ -85,9 +111,9 @@ fn resume_continues_exactly_and_bad_input_is_refused() {
     let dir = tempfile::tempdir().unwrap();
     let data = dataset(dir.path(), "train", 11);
     let (once, twice) = (dir.path().join("once"), dir.path().join("twice"));
-    assert!(train(&data, &once, 20, &[]).status.success());
-    assert!(train(&data, &twice, 10, &[]).status.success());
-    let o = train(&data, &twice, 20, &["--resume"]);
+    assert!(train(&data, &once, 20, &["--points", "32"]).status.success());
+    assert!(train(&data, &twice, 10, &["--points", "32"]).status.success());
+    let o = train(&data, &twice, 20, &["--points", "32", "--resume"]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(String::from_utf8_lossy(&o.stdout).contains("steps 11..=20"));
     let sorted = |p: PathBuf| -> std::collections::BTreeMap<String, tch::Tensor> { read_tensors(&p).unwrap().into_iter().collect() };
@@ -100,7 +126,7 @@ fn resume_continues_exactly_and_bad_input_is_refused() {
     assert_eq!(read_meta(&twice.join("latest.safetensors")).unwrap().step, 20);
 
     // Another network shape cannot resume this checkpoint; a missing dataset is named.
-    let o = train(&data, &twice, 30, &["--resume", "--dim", "16"]);
+    let o = train(&data, &twice, 30, &["--points", "32", "--resume", "--dim", "16"]);
     assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("holds another network"), "{}", String::from_utf8_lossy(&o.stderr));
     let missing = dir.path().join("nowhere");
     let o = train(&missing, &dir.path().join("x"), 5, &[]);
