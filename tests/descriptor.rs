@@ -128,6 +128,17 @@ fn resume_continues_exactly_and_bad_input_is_refused() {
     // Another network shape cannot resume this checkpoint; a missing dataset is named.
     let o = train(&data, &twice, 30, &["--points", "32", "--resume", "--dim", "16"]);
     assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("holds another network"), "{}", String::from_utf8_lossy(&o.stderr));
+    // Real pairs come as a benchmark folder (`fragments --single-frames`): every pair of it trains.
+    let seq = dir.path().join("seq");
+    let bench = dir.path().join("bench");
+    assert!(bin().args(["synth", "--out", seq.to_str().unwrap(), "--frames", "40", "--seed", "300"]).output().unwrap().status.success());
+    let o = bin().args(["fragments", seq.join("synthetic-300").to_str().unwrap(), "--single-frames", "--out", bench.to_str().unwrap()]).output().unwrap();
+    let pairs = String::from_utf8_lossy(&o.stdout).split(" pairs").next().and_then(|s| s.rsplit(' ').next()).and_then(|n| n.parse::<usize>().ok());
+    assert!(o.status.success() && pairs.is_some_and(|n| n > 0), "{}", String::from_utf8_lossy(&o.stdout));
+    let o = train(&bench, &dir.path().join("real"), 3, &["--points", "16"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(String::from_utf8_lossy(&o.stdout).contains(&format!("{} training pairs", pairs.unwrap())), "{}", String::from_utf8_lossy(&o.stdout));
+
     let missing = dir.path().join("nowhere");
     let o = train(&missing, &dir.path().join("x"), 5, &[]);
     assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("nowhere"), "{}", String::from_utf8_lossy(&o.stderr));

@@ -16,8 +16,9 @@ Every --checkpoint-every steps: <out>/latest.safetensors (network, Adam moments,
 <out>/loss.jsonl (loss, share of points whose best match is their partner)."
 )]
 pub struct TrainDescriptorArgs {
-    /// Pair dataset(s) made by `pointreggpt build` (folders or object-store URLs); only `ok` rows are used.
-    /// Repeat to combine.
+    /// Pair dataset(s) made by `pointreggpt build` (folders or object-store URLs; only `ok` rows are used), or
+    /// benchmark folders of real pairs with captured poses (`pointreggpt fragments --single-frames` of the
+    /// training frames; clouds voxelised at 2.5 cm). Repeat to combine.
     #[arg(long, required = true)]
     pub data: Vec<PathBuf>,
     /// Optimiser steps in total (a resumed run continues up to this count).

@@ -1,13 +1,21 @@
 //! Training pairs for the descriptor: the `ok` rows of pair datasets (their two clouds and the stored
-//! `t_target_from_source`), and corresponding points drawn from them.
+//! `t_target_from_source`) or the pairs of a registration benchmark folder (real frames with their captured
+//! poses, e.g. `pointreggpt fragments --single-frames` of the training frames), and corresponding points
+//! drawn from them.
 
 use crate::error::{Error, Result};
-use crate::geometry::{pose_from_rows, Point, RadiusIndex};
+use crate::geometry::{pose_from_rows, voxel_downsample, Point, RadiusIndex};
+use crate::registration::benchmark::find_benchmarks;
 use crate::rng::Rng;
 use crate::shards::dataset::Dataset;
 use crate::shards::Status;
 use nalgebra::Isometry3;
-use std::path::PathBuf;
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+/// Benchmark clouds are voxel-downsampled to this, metres (the build's voxel).
+pub const BENCH_VOXEL_M: f32 = 0.025;
 
 /// One pair: two clouds (each in its own camera frame) and the pose that maps the source into the target.
 pub struct TrainPair {
@@ -17,10 +25,16 @@ pub struct TrainPair {
     pub t_target_from_source: Isometry3<f64>,
 }
 
-/// The `ok` pairs of `datasets` (folders or object-store URLs), in dataset then unit order.
+/// The training pairs of `datasets`, in the order given: for a pair dataset (folder or object-store URL)
+/// its `ok` rows in unit order; for a benchmark folder (one with `metadata/benchmarks/`) every pair of
+/// every benchmark in it.
 pub fn load_pairs(datasets: &[PathBuf]) -> Result<Vec<TrainPair>> {
     let mut out = Vec::new();
     for path in datasets {
+        if path.join("metadata/benchmarks").is_dir() {
+            out.extend(bench_pairs(path)?);
+            continue;
+        }
         let rows = Dataset::open(path)?.read_pairs()?;
         let before = out.len();
         for r in rows.into_iter().filter(|r| r.status == Status::Ok && !r.source_points.is_empty() && !r.target_points.is_empty()) {
@@ -30,6 +44,32 @@ pub fn load_pairs(datasets: &[PathBuf]) -> Result<Vec<TrainPair>> {
         if out.len() == before {
             return Err(Error::input(path, "no `ok` pair with points: nothing to train a descriptor on"));
         }
+    }
+    Ok(out)
+}
+
+/// The pairs of the benchmark folder `root`: source = cloud j, target = cloud i, pose = gt.log's
+/// `t_i_from_j`, clouds voxel-downsampled to [`BENCH_VOXEL_M`].
+fn bench_pairs(root: &Path) -> Result<Vec<TrainPair>> {
+    let mut clouds: HashMap<PathBuf, Arc<Vec<Point>>> = HashMap::new();
+    let mut cloud = |p: &PathBuf| -> Result<Arc<Vec<Point>>> {
+        if let Some(c) = clouds.get(p) {
+            return Ok(c.clone());
+        }
+        let c = Arc::new(voxel_downsample(&crate::ply::read_ply(p)?, BENCH_VOXEL_M));
+        clouds.insert(p.clone(), c.clone());
+        Ok(c)
+    };
+    let mut out = Vec::new();
+    for bench in find_benchmarks(root)? {
+        for p in &bench.pairs {
+            let (source, target) = (cloud(&p.source_path)?, cloud(&p.target_path)?);
+            let key = format!("{}/{}/{}/{}", bench.name, p.scene, p.i, p.j);
+            out.push(TrainPair { key, source: source.to_vec(), target: target.to_vec(), t_target_from_source: p.t_i_from_j });
+        }
+    }
+    if out.is_empty() {
+        return Err(Error::input(root, "a benchmark folder without pairs: nothing to train a descriptor on"));
     }
     Ok(out)
 }
