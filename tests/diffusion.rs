@@ -13,7 +13,7 @@ use pointreggpt::training::diffusion::train::{batch_loss, train_diffusion, Diffu
 use pointreggpt::diffusion::sampler::Resample;
 use pointreggpt::diffusion::{ddnm_sample, Problem, SamplerOptions, Schedule};
 use pointreggpt::geometry::{DepthMap, Intrinsics};
-use pointreggpt::inpainting::{DiffusionInpaintConfig, DiffusionInpainter, InpaintContext, Inpainter, Start};
+use pointreggpt::inpainting::{Background, DiffusionInpaintConfig, DiffusionInpainter, InpaintContext, Inpainter, PushPull, Start};
 use pointreggpt::nn::checkpoint::write_safetensors;
 use pointreggpt::nn::denoiser::{Denoiser, DenoiserConfig};
 use pointreggpt::nn::{ModelPath, Preset};
@@ -288,8 +288,9 @@ fn training_lowers_the_loss_and_resume_equals_an_uninterrupted_run() {
     assert!(train_diffusion(&data, &bad, |_| {}).unwrap_err().to_string().contains("--max-t"));
 }
 
-/// The hole-aware loss of `net` on fixed draws: each frame holed by a fixed sideways round trip.
-fn fixed_hole_loss(net: &Denoiser, data: &FrameSet, hole_weight: f32) -> f64 {
+/// The hole-aware loss of `net` on fixed draws: each frame holed by a fixed sideways round trip, the holes
+/// filled by `fill`.
+fn fixed_hole_loss(net: &Denoiser, data: &FrameSet, hole_weight: f32, fill: &dyn Inpainter) -> f64 {
     let s = Schedule::official();
     tch::manual_seed(99);
     let n = data.len().min(8);
@@ -297,7 +298,7 @@ fn fixed_hole_loss(net: &Denoiser, data: &FrameSet, hole_weight: f32) -> f64 {
     let motion = Isometry3::from_parts(Translation3::new(-0.3, 0.05, 0.0), UnitQuaternion::from_euler_angles(0.02, 0.08, 0.0));
     let (mut x, mut start, mut weight) = (Vec::new(), Vec::new(), Vec::new());
     for f in &data.frames[..n] {
-        let holed = holed_frame(&f.depth, w, h, f.intrinsics, &motion, &NoCorrection);
+        let holed = holed_frame(&f.depth, w, h, f.intrinsics, &motion, &NoCorrection, fill);
         x.extend_from_slice(&f.depth);
         start.extend_from_slice(&holed.start);
         weight.extend(f.depth.iter().zip(&holed.holes).map(|(v, hole)| if *v <= -1.0 { 0.0 } else if *hole { hole_weight } else { 1.0 }));
@@ -328,8 +329,8 @@ fn hole_aware_training_lowers_the_loss_on_push_pull_filled_round_trip_holes() {
     };
     let same = Holes { start: x0.copy(), weight: x0.ones_like() };
     assert!((loss(None) - loss(Some(&same))).abs() < 1e-6 * loss(None), "{} vs {}", loss(None), loss(Some(&same)));
-    let before = fixed_hole_loss(&net, &data, 4.0);
-    assert!((before - fixed_hole_loss(&net, &data, 1.0)).abs() > 1e-6, "hole weight has no effect");
+    let before = fixed_hole_loss(&net, &data, 4.0, &PushPull);
+    assert!((before - fixed_hole_loss(&net, &data, 1.0, &PushPull)).abs() > 1e-6, "hole weight has no effect");
 
     // 60 hole-aware steps (from the same initial network) lower the hole-aware loss on fixed draws.
     let dir = tempfile::tempdir().unwrap();
@@ -340,11 +341,26 @@ fn hole_aware_training_lowers_the_loss_on_push_pull_filled_round_trip_holes() {
     train_diffusion(&data, &o, |_| {}).unwrap();
     let (_v1, trained, meta) = load_denoiser(&dir.path().join(LATEST), Device::Cpu).unwrap();
     assert_eq!(meta.info["options"]["holes"], true);
-    let after = fixed_hole_loss(&trained, &data, 4.0);
+    let after = fixed_hole_loss(&trained, &data, 4.0, &PushPull);
     assert!(after < 0.7 * before, "hole-aware loss {before} -> {after}");
+
+    // The same from the background fill's start (`--holes-start background`), on background-filled holes.
+    let before = fixed_hole_loss(&net, &data, 4.0, &Background);
+    let dir = tempfile::tempdir().unwrap();
+    o.out = dir.path().to_path_buf();
+    o.hole_start = Start::Background;
+    train_diffusion(&data, &o, |_| {}).unwrap();
+    let (_v2, trained, meta) = load_denoiser(&dir.path().join(LATEST), Device::Cpu).unwrap();
+    assert_eq!(meta.info["options"]["hole_start"], "background");
+    let after = fixed_hole_loss(&trained, &data, 4.0, &Background);
+    assert!(after < 0.7 * before, "hole-aware loss from the background start {before} -> {after}");
+
     let mut bad = opts(tempfile::tempdir().unwrap().path(), 1);
     bad.hole_weight = 0.0;
     assert!(train_diffusion(&data, &bad, |_| {}).unwrap_err().to_string().contains("--hole-weight"));
+    let mut bad = opts(tempfile::tempdir().unwrap().path(), 1);
+    (bad.holes, bad.hole_start) = (true, Start::Noise);
+    assert!(train_diffusion(&data, &bad, |_| {}).unwrap_err().to_string().contains("--holes-start"));
 }
 
 #[test]
@@ -461,8 +477,9 @@ fn eval_inpaint_on_real_frames_scores_every_method() {
     let text = eval_inpaint(&real, &dir.path().join("eval.csv"), &["--max-views", "3", "--steps", "2", "--diffusion", ckpt.to_str().unwrap()]);
     let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
     let rows: Vec<Vec<String>> = text.lines().skip(1).map(|l| l.split(',').map(String::from).collect()).collect();
-    // 3 corrections x (none, push-pull, nearest, background, diffusion from noise, from push-pull, from background).
-    assert_eq!(rows.len(), 21, "{text}");
+    // 3 corrections x (none, push-pull, nearest, background, IP-Basic, diffusion from noise, from push-pull,
+    // from background).
+    assert_eq!(rows.len(), 24, "{text}");
     let get = |c: &str, f: &str, col: &str| -> f64 {
         let i = header.iter().position(|h| *h == col).unwrap_or_else(|| panic!("no column {col}"));
         rows.iter().find(|r| r[0] == c && r[1].starts_with(f)).unwrap_or_else(|| panic!("{c}/{f}"))[i].parse().unwrap()
@@ -475,6 +492,9 @@ fn eval_inpaint_on_real_frames_scores_every_method() {
             assert!(get(c, f, "fill_coverage") > 0.9, "{c}/{f}: {text}");
         }
         assert!(get(c, "diffusion", "fill_coverage") > 0.5, "{text}");
+        // IP-Basic fills less than every hole (its dilations reach 15 px beyond the first fills), but more
+        // than none.
+        assert!(get(c, "ip_basic", "fill_coverage") > 0.3 && get(c, "ip_basic", "fill_coverage") <= get(c, "push_pull", "fill_coverage"), "{text}");
         // The kept pixels and the holes do not depend on the fill.
         assert_eq!(get(c, "none", "kept_per_map"), get(c, "diffusion", "kept_per_map"));
         assert_eq!(get(c, "none", "unknown_share"), get(c, "background", "unknown_share"));
@@ -519,6 +539,21 @@ fn eval_inpaint_scores_a_build_config_and_dumps_the_views_it_scored() {
         for name in ["condition", "captured"] {
             assert_eq!(std::fs::metadata(folder.join(format!("{i:03}_{name}.npy"))).unwrap().len() as usize, 10 + 118 + 4 * w * h);
         }
+        // The fill's output is dumped too: the condition's known pixels bit for bit, the holes filled.
+        let f32s = |name: &str| -> Vec<f32> {
+            let bytes = std::fs::read(folder.join(format!("{i:03}_{name}.npy"))).unwrap();
+            let start = 10 + u16::from_le_bytes([bytes[8], bytes[9]]) as usize;
+            bytes[start..].chunks(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect()
+        };
+        let (condition, fill) = (f32s("condition"), f32s("fill_paper-3dmatch-classical"));
+        assert_eq!(fill.len(), w * h);
+        let known = &mask[10 + header_len..];
+        for j in 0..w * h {
+            if known[j] == 1 {
+                assert_eq!(fill[j].to_bits(), condition[j].to_bits(), "view {i} pixel {j}");
+            }
+        }
+        assert!(fill.iter().filter(|z| **z > 0.0).count() > known.iter().filter(|k| **k == 1).count());
     }
     assert!((unknown as f64 / pixels as f64 - col("unknown_share")).abs() < 1e-6, "{text}");
 }

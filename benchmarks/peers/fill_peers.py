@@ -11,6 +11,11 @@ Peers:
   on the CPU"), written from the paper's description of its fast pipeline.
 Every peer keeps the known pixels as they are (the exact-consistency rule of our fills).
 
+Our fills are scored from the outputs `eval inpaint --dump-views` writes beside the views (NNN_fill_<fill>.npy),
+with the same code as the peers; `--ours` only brings their timing. Two tables: each row on every pixel it
+fills (its coverage shown), and every row on the pixels all rows fill (IP-Basic leaves pixels far from any
+known depth empty, so alone its scores cover the easy part of a large hole).
+
 Usage: fill_peers.py --views DIR/<correction> [--ours eval.csv] [--label TEXT]
 """
 import argparse
@@ -105,7 +110,15 @@ def fill_ip_basic(cond, known, max_depth=100.0):
     return out
 
 
-PEERS = [("opencv_ns", fill_ns), ("opencv_telea", fill_telea), ("opencv_telea_u16mm", fill_telea_mm), ("nearest_edt", fill_nearest), ("ip_basic", fill_ip_basic)]
+def fill_ip_basic_nearest(cond, known):
+    """IP-Basic leaves the pixels its 31x31 dilation cannot reach empty (most of a large re-projection hole);
+    here they get the nearest valid pixel, so the row fills every pixel as the others do."""
+    out = fill_ip_basic(cond, known)
+    return np.where(out > 0, out, fill_nearest(cond, known))
+
+
+PEERS = [("opencv_ns", fill_ns), ("opencv_telea", fill_telea), ("opencv_telea_u16mm", fill_telea_mm), ("nearest_edt", fill_nearest),
+         ("ip_basic", fill_ip_basic), ("ip_basic+nearest", fill_ip_basic_nearest)]
 
 
 # ---------------------------------------------------------------- metrics (fill_metrics.rs, independently)
@@ -134,7 +147,8 @@ class Scores:
         self.cloud = 0.0
         self.seconds = 0.0
 
-    def add(self, known, out, g, k, lo, hi):
+    def add(self, known, out, g, k, lo, hi, only=None):
+        """Scores one view; `only` (bool, H x W) restricts the filled pixels scored (the common pixels)."""
         self.views += 1
         self.pixels += g.size
         self.unknown_all += int((~known).sum())
@@ -142,6 +156,8 @@ class Scores:
         unk = ~known & gv
         self.unknown += int(unk.sum())
         sel = unk & (out > lo) & (out < hi)
+        if only is not None:
+            sel &= only
         z, t = out[sel].astype(np.float64), g[sel].astype(np.float64)
         self.err["fill"].append(np.stack([z, t]))
         band = edge_band(g, lo, hi)
@@ -195,14 +211,16 @@ def load_views(folder):
     for v in meta["views"]:
         i = v["index"]
         arr = {n: np.load(os.path.join(folder, f"{i:03d}_{n}.npy")) for n in ("condition", "known", "captured")}
-        views.append((arr["condition"], arr["known"].astype(bool), arr["captured"], v))
+        fills = {f[len(f"{i:03d}_fill_"):-4]: np.load(os.path.join(folder, f))
+                 for f in sorted(os.listdir(folder)) if f.startswith(f"{i:03d}_fill_") and f.endswith(".npy")}
+        views.append((arr["condition"], arr["known"].astype(bool), arr["captured"], v, fills))
     return meta, views
 
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--views", required=True, help="one correction's folder of `eval inpaint --dump-views`")
-    ap.add_argument("--ours", help="`eval inpaint --out` CSV: its rows of this correction join the table")
+    ap.add_argument("--ours", help="`eval inpaint --out` CSV: the ms/view of our fills (their scores come from the dumped fills)")
     ap.add_argument("--label", default="", help="heading of the table")
     ap.add_argument("--csv", help="write the peers' rows here")
     args = ap.parse_args()
@@ -210,42 +228,74 @@ def main():
     meta, views = load_views(args.views)
     lo, hi = meta["depth_range"]
     corr = meta["correction"]
-    rows = []
-    if args.ours:
-        with open(args.ours) as f:
-            for r in csv.DictReader(f):
-                if r["correction"] == corr and r["fill"] != "none":
-                    rows.append(("ours: " + r["fill"], {k: float(v) for k, v in r.items() if k not in ("correction", "fill")}))
+    # Every row's output per view: ours from the dumped fills (`eval inpaint --dump-views`), peers run here.
+    outputs = {}
+    for name in sorted(views[0][4]):
+        outputs["ours: " + name] = ([fills[name] for *_, fills in views], None)
     for name, fn in PEERS:
-        s = Scores()
-        for cond, known, g, v in views:
+        outs, seconds = [], 0.0
+        for cond, known, g, v, _ in views:
             t0 = time.perf_counter()
             out = fn(cond, known)
             out = np.where(known, cond, out).astype(np.float32)
-            s.seconds += time.perf_counter() - t0
-            s.add(known, out, g, v, lo, hi)
-        rows.append(("peer: " + name, s.row()))
-    h, w = views[0][2].shape
-    ours = [r for r in rows if r[0].startswith("ours")]
-    best = min(ours or rows, key=lambda r: r[1]["fill_abs_rel"])
-    print(f"{args.label} correction {corr}: {len(views)} views {w}x{h}, unknown share {rows[-1][1]['unknown_share']:.1%}; "
-          f"ratios = row / {best[0]} (above 1: worse than it)")
-    print(f"{'fill':<28} {'AbsRel':>7} {'x':>5} {'RMSE m':>7} {'x':>5} {'d<1.25':>7} {'edgeAR':>7} {'edgeRM':>7} "
-          f"{'flying':>7} {'cloud cm':>8} {'ms/view':>8} {'ms/256²':>8}")
-    b = best[1]
+            seconds += time.perf_counter() - t0
+            outs.append(out)
+        outputs["peer: " + name] = (outs, seconds)
+    timing, theirs = {}, {}
+    if args.ours:
+        with open(args.ours) as f:
+            for r in csv.DictReader(f):
+                if r["correction"] == corr:
+                    timing["ours: " + r["fill"].replace("/", "-")] = float(r["ms_per_view"])
+                    theirs["ours: " + r["fill"].replace("/", "-")] = float(r["fill_abs_rel"])
+    if not outputs:
+        sys.exit("fill_peers: nothing to score")
+    # The pixels every row fills (IP-Basic leaves most of a large hole empty): the fair common ground.
+    common = [np.ones_like(views[i][1]) for i in range(len(views))]
+    for outs, _ in outputs.values():
+        for i, out in enumerate(outs):
+            common[i] &= (out > lo) & (out < hi)
+    tables = []
+    for title, only in (("every pixel each row fills", None), ("the pixels every row fills", common)):
+        rows = []
+        for name, (outs, seconds) in outputs.items():
+            sc = Scores()
+            for i, (cond, known, g, v, _) in enumerate(views):
+                sc.add(known, outs[i], g, v, lo, hi, None if only is None else only[i])
+            sc.seconds = seconds if seconds is not None else timing.get(name, float("nan")) * len(views) / 1000.0
+            rows.append((name, sc.row()))
+        tables.append((title, rows))
+    rows = tables[0][1]
+    # Cross-check: the AbsRel computed here of our dumped fills is the one `eval inpaint` computed in Rust.
     for name, r in rows:
-        ms256 = r["ms_per_view"] * 65536 / (w * h)
-        print(f"{name:<28} {r['fill_abs_rel']:7.4f} {r['fill_abs_rel'] / b['fill_abs_rel']:5.2f} {r['fill_rmse_m']:7.3f} "
-              f"{r['fill_rmse_m'] / b['fill_rmse_m']:5.2f} {100 * r['fill_delta_1_25']:6.1f}% {r['edge_abs_rel']:7.4f} "
-              f"{r['edge_rmse_m']:7.3f} {100 * r['flying_share']:6.1f}% {100 * r['cloud_distance_m']:8.2f} "
-              f"{r['ms_per_view']:8.1f} {ms256:8.1f}")
+        if name in theirs and abs(theirs[name] - r["fill_abs_rel"]) > 1e-4:
+            print(f"warning: {name}: AbsRel {r['fill_abs_rel']:.6f} here, {theirs[name]:.6f} in {args.ours}", file=sys.stderr)
+    h, w = views[0][2].shape
+    for title, rows in tables:
+        # The reference row: our best AbsRel among the rows that fill (nearly) every hole pixel.
+        full = [r for r in rows if r[1]["fill_coverage"] > 0.99] or rows
+        ours = [r for r in full if r[0].startswith("ours")]
+        best = min(ours or full, key=lambda r: r[1]["fill_abs_rel"])
+        print(f"{args.label} correction {corr}: {len(views)} views {w}x{h}, unknown share {rows[-1][1]['unknown_share']:.1%}; "
+              f"scored on {title}; ratios = row / {best[0]} (above 1: worse than it)")
+        print(f"{'fill':<28} {'cover':>6} {'AbsRel':>7} {'x':>5} {'RMSE m':>7} {'x':>5} {'d<1.25':>7} {'edgeAR':>7} {'edgeRM':>7} "
+              f"{'flying':>7} {'cloud cm':>8} {'ms/view':>8} {'ms/256²':>8}")
+        b = best[1]
+        for name, r in rows:
+            ms256 = r["ms_per_view"] * 65536 / (w * h)
+            print(f"{name:<28} {100 * r['fill_coverage']:5.1f}% {r['fill_abs_rel']:7.4f} {r['fill_abs_rel'] / b['fill_abs_rel']:5.2f} "
+                  f"{r['fill_rmse_m']:7.3f} {r['fill_rmse_m'] / b['fill_rmse_m']:5.2f} {100 * r['fill_delta_1_25']:6.1f}% "
+                  f"{r['edge_abs_rel']:7.4f} {r['edge_rmse_m']:7.3f} {100 * r['flying_share']:6.1f}% "
+                  f"{100 * r['cloud_distance_m']:8.2f} {r['ms_per_view']:8.1f} {ms256:8.1f}")
+        print()
     if args.csv:
         with open(args.csv, "w", newline="") as f:
             wr = csv.writer(f)
             keys = list(rows[-1][1].keys())
-            wr.writerow(["correction", "fill"] + keys)
-            for name, r in rows:
-                wr.writerow([corr, name] + [r.get(k, "") for k in keys])
+            wr.writerow(["correction", "fill", "pixels"] + keys)
+            for (title, rows), pixels in zip(tables, ("each", "common")):
+                for name, r in rows:
+                    wr.writerow([corr, name, pixels] + [r.get(k, "") for k in keys])
 
 
 if __name__ == "__main__":

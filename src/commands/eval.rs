@@ -30,7 +30,8 @@ pub enum EvalWhat {
     after_help = "For each selected frame j of each sequence: the frame's points (official working resolution, depth range and \
 crop box) are z-buffered into the stored camera of frame j+GAP, corrected (none, min-pool 3.75 cm, the correction U-Net at \
 tau_m 0.99), filled (none, push-pull, nearest valid pixel, background = the farther hole border along the epipolar \
-direction, diffusion from pure noise as the authors, except for a network trained with --max-t; diffusion started from the \
+direction, IP-Basic = Ku et al. 2018's morphological completion, which leaves pixels far from any known depth empty, so its \
+coverage is below 100%; diffusion from pure noise as the authors, except for a network trained with --max-t; diffusion started from the \
 noised push-pull or background fill) and compared with the depth captured at j+GAP, where valid. With --pipeline, only the condition \
 correction and the fill of each given build config are evaluated (the views use the first config's [working] section). \
 Columns: unknown = share of all view pixels unknown after correction (the hole size; a build's target views are 58-82% \
@@ -93,7 +94,8 @@ pub struct EvalInpaintArgs {
     #[arg(long)]
     pub pipeline: Vec<PathBuf>,
     /// Also write every view (after each correction) to this folder: NNN_condition.npy, NNN_known.npy,
-    /// NNN_captured.npy (float32 metres / bool, H x W) and views.json (intrinsics, pose, depth range).
+    /// NNN_captured.npy (float32 metres / bool, H x W), views.json (intrinsics, pose, depth range) and each
+    /// fill's output, NNN_fill_<fill>.npy (benchmarks/peers/fill_peers.py scores them with the peers).
     #[arg(long)]
     pub dump_views: Option<PathBuf>,
 }
@@ -236,6 +238,7 @@ fn run_inpaint(a: &EvalInpaintArgs, out: &mut dyn Write) -> Result<()> {
         NamedFill { name: "push_pull".into(), inpainter: InpaintConfig::PushPull.build()? },
         NamedFill { name: "nearest".into(), inpainter: InpaintConfig::Nearest.build()? },
         NamedFill { name: "background".into(), inpainter: InpaintConfig::Background.build()? },
+        NamedFill { name: "ip_basic".into(), inpainter: InpaintConfig::IpBasic.build()? },
     ];
     // A network trained only on the nearly clean steps (`train diffusion --max-t`) has no pure-noise row.
     let low_steps_only = crate::diffusion::checkpoint::read_meta(&a.diffusion).ok().and_then(|m| m.trained_below_step()).is_some();
@@ -266,7 +269,7 @@ fn run_inpaint(a: &EvalInpaintArgs, out: &mut dyn Write) -> Result<()> {
     }
     writeln!(out, "{} views ({} frames apart) from {}", views.len(), a.gap, a.sequences.display()).map_err(w)?;
     let bar = crate::runtime::progress::bar(views.len() as u64, !a.quiet, "views");
-    let rows = evaluate(&views, &corrections, &fills, range, || bar.inc(1));
+    let rows = evaluate(&views, &corrections, &fills, range, a.dump_views.as_deref(), || bar.inc(1))?;
     bar.finish_and_clear();
     report(out, &format_table(&rows), &to_csv(&rows), &a.out)
 }
@@ -292,7 +295,8 @@ fn run_pipelines(
             dump_views(&dir.join(name), views, &corrections, range)?;
         }
         let fills = [NamedFill { name: name.clone(), inpainter: config.inpaint.build()? }];
-        rows.extend(evaluate(views, &corrections, &fills, range, || bar.inc(1)));
+        let dump = a.dump_views.as_ref().map(|dir| dir.join(name));
+        rows.extend(evaluate(views, &corrections, &fills, range, dump.as_deref(), || bar.inc(1))?);
     }
     bar.finish_and_clear();
     report(out, &format_table(&rows), &to_csv(&rows), &a.out)

@@ -65,10 +65,14 @@ pub struct TrainDiffusionArgs {
     pub max_t: Option<usize>,
     /// Hole-aware training, for the push-pull-started sampler (with --max-t): each frame gets the holes a
     /// camera move opens (a round trip through a camera drawn from the build's pivot sampler, its motion
-    /// scaled by U(0.1, 1)) and a correction (see --holes-correction), filled by push-pull, and is noised
+    /// scaled by U(0.1, 1)) and a correction (see --holes-correction), filled by --holes-start, and is noised
     /// from that fill; the loss counts only pixels with true depth, the holes --hole-weight times as much.
     #[arg(long)]
     pub holes: bool,
+    /// With --holes: the classical fill of the holes, which the noised start is made from; match the
+    /// `[inpaint] start` the model will be sampled from (default push-pull).
+    #[arg(long, value_enum)]
+    pub holes_start: Option<crate::inpainting::Start>,
     /// Loss weight of hole pixels relative to the others, with --holes.
     #[arg(long)]
     pub hole_weight: Option<f64>,
@@ -297,8 +301,9 @@ fn run_diffusion(a: &TrainDiffusionArgs, out: &mut dyn Write) -> Result<()> {
     opts.max_t = a.max_t.or(opts.max_t);
     opts.holes = a.holes;
     opts.hole_weight = a.hole_weight.unwrap_or(opts.hole_weight);
-    if !a.holes && (a.holes_correction.is_some() || a.hole_weight.is_some()) {
-        return Err(Error::config("--holes-correction/--hole-weight", "only apply with --holes"));
+    opts.hole_start = a.holes_start.unwrap_or(opts.hole_start);
+    if !a.holes && (a.holes_correction.is_some() || a.hole_weight.is_some() || a.holes_start.is_some()) {
+        return Err(Error::config("--holes-correction/--hole-weight/--holes-start", "only apply with --holes"));
     }
     if let Some(path) = &a.holes_correction {
         let checkpoint = crate::nn::ModelPath::new(&path.display().to_string());

@@ -1,7 +1,7 @@
 //! `InpaintConfig`: the inpainting methods a pipeline config can name (the `[inpaint]` section), their
 //! checks and the inpainter each builds.
 
-use super::{Background, DiffusionInpaintConfig, DiffusionInpainter, Inpainter, Nearest, NoInpainting, PushPull};
+use super::{Background, DiffusionInpaintConfig, DiffusionInpainter, Inpainter, IpBasic, Nearest, NoInpainting, PushPull};
 use serde::{Deserialize, Serialize};
 
 /// The inpainting methods a pipeline config can name.
@@ -17,6 +17,8 @@ pub enum InpaintConfig {
     /// Occlusion-aware: copies the farther of the two hole borders along the epipolar direction of the
     /// camera motion (the uncovered background of a disocclusion).
     Background,
+    /// IP-Basic (Ku et al. 2018): morphological completion of inverted depth (nearer surfaces grow).
+    IpBasic,
     /// The diffusion model with the exact range–null-space step (paper §3.2, reference §5.4).
     Diffusion(DiffusionInpaintConfig),
 }
@@ -45,6 +47,7 @@ impl InpaintConfig {
             InpaintConfig::PushPull => Box::new(PushPull),
             InpaintConfig::Nearest => Box::new(Nearest),
             InpaintConfig::Background => Box::new(Background),
+            InpaintConfig::IpBasic => Box::new(IpBasic),
             InpaintConfig::Diffusion(c) => Box::new(DiffusionInpainter::load(c, tch::Device::Cpu)?),
         })
     }

@@ -59,13 +59,23 @@ pub struct NamedFill {
     pub inpainter: Box<dyn Inpainter>,
 }
 
-/// Scores every (correction, fill) pair over `views`; `on_view` is called after each view.
-pub fn evaluate(views: &[View], corrections: &[NamedCorrector], fills: &[NamedFill], range: (f32, f32), mut on_view: impl FnMut()) -> Vec<MethodRow> {
+/// Scores every (correction, fill) pair over `views`; `on_view` is called after each view. With `dump`,
+/// each fill's output is also written as `DIR/<correction>/NNN_fill_<fill>.npy` (float32 metres, beside
+/// [`dump_views`]'s files; `/` in a fill name becomes `-`), so outside scripts score it on the same pixels
+/// as their own fills.
+pub fn evaluate(
+    views: &[View],
+    corrections: &[NamedCorrector],
+    fills: &[NamedFill],
+    range: (f32, f32),
+    dump: Option<&Path>,
+    mut on_view: impl FnMut(),
+) -> Result<Vec<MethodRow>> {
     let mut rows: Vec<MethodRow> = corrections
         .iter()
         .flat_map(|c| fills.iter().map(move |f| MethodRow { correction: c.name.clone(), fill: f.name.clone(), scores: FillScores::default() }))
         .collect();
-    for v in views {
+    for (i, v) in views.iter().enumerate() {
         for (ci, c) in corrections.iter().enumerate() {
             let (mut condition, mut known) = (v.condition.clone(), v.known.clone());
             let keep = c.corrector.keep_mask(&condition);
@@ -77,11 +87,16 @@ pub fn evaluate(views: &[View], corrections: &[NamedCorrector], fills: &[NamedFi
                 let scores = &mut rows[ci * fills.len() + fi].scores;
                 scores.fill_ns += clock.elapsed().as_nanos();
                 scores.add(&known, &out, &v.captured, &v.intrinsics, range);
+                if let (Some(dir), false) = (dump, f.name == "none") {
+                    let path = dir.join(&c.name).join(format!("{i:03}_fill_{}.npy", f.name.replace('/', "-")));
+                    let (w, h) = (out.width() as usize, out.height() as usize);
+                    std::fs::write(&path, crate::export::npy::encode_npy_image_f32(w, h, out.data())).map_err(|e| Error::io(&path, e))?;
+                }
             }
         }
         on_view();
     }
-    rows
+    Ok(rows)
 }
 
 /// The rows as an aligned table.

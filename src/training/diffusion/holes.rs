@@ -6,12 +6,12 @@
 //! its points are projected into a camera moved by a (scaled) draw of the build's pivot sampler and back,
 //! so the pixels the moved camera could not see — disocclusions, the strip outside its frustum, the
 //! cracks of forward projection — are unknown, as in a re-projected view, and the rest keep the
-//! round trip's depth. A corrector then drops pixels as the build's `[correct.condition]` does, and
-//! push–pull fills the unknown pixels as the sampler's start does.
+//! round trip's depth. A corrector then drops pixels as the build's `[correct.condition]` does, and the
+//! sampler's classical start (push–pull or background) fills the unknown pixels.
 
 use crate::correction::{apply_keep_mask, Corrector};
 use crate::geometry::{backproject, project_zbuffer, DepthMap, DepthRange, Intrinsics, PivotPoseSampler};
-use crate::inpainting::{InpaintContext, Inpainter, PushPull};
+use crate::inpainting::{InpaintContext, Inpainter};
 use crate::nn::space::{from_network, to_network, DEPTH_SCALE_M};
 use crate::rng::Rng;
 use nalgebra::Isometry3;
@@ -49,15 +49,16 @@ pub const MOTION_SCALE: (f64, f64) = (0.1, 1.0);
 pub const UNET_THRESHOLDS: [f32; 2] = [0.5, 0.99];
 
 /// One holed training frame in network space: the sampler's start (the round trip's known depths with
-/// push–pull in the holes) and the holes (pixels unknown after the round trip and the correction).
+/// the classical fill in the holes) and the holes (pixels unknown after the round trip and the correction).
 pub struct HoledFrame {
     pub start: Vec<f32>,
     pub holes: Vec<bool>,
 }
 
 /// Opens holes in a network-space frame (row-major `width`×`height`, intrinsics `[fx, fy, cx, cy]`) by a
-/// round trip through `t_moved_from_camera` and `correct`, and fills them as the sampler's push–pull
-/// start does.
+/// round trip through `t_moved_from_camera` and `correct`, and fills them with `fill` as the sampler's
+/// classical start does. The re-projected view comes from the moved camera, so the fill is told the
+/// motion `t_target_from_source = inv(t_moved_from_camera)` (the epipolar direction of `Background`).
 pub fn holed_frame(
     frame: &[f32],
     width: usize,
@@ -65,6 +66,7 @@ pub fn holed_frame(
     intrinsics: [f64; 4],
     t_moved_from_camera: &Isometry3<f64>,
     correct: &dyn Corrector,
+    fill: &dyn Inpainter,
 ) -> HoledFrame {
     let [fx, fy, cx, cy] = intrinsics;
     let k = Intrinsics::new(fx, fy, cx, cy, width as u32, height as u32).expect("training intrinsics are valid");
@@ -72,7 +74,7 @@ pub fn holed_frame(
     let RoundTrip { mut depth, mut known } = round_trip(&depth, &k, t_moved_from_camera);
     let keep = correct.keep_mask(&depth);
     apply_keep_mask(&mut depth, &mut known, &keep);
-    let filled = PushPull.inpaint(&depth, &known, &InpaintContext { intrinsics: k, seed: 0, t_target_from_source: t_moved_from_camera.inverse() });
+    let filled = fill.inpaint(&depth, &known, &InpaintContext { intrinsics: k, seed: 0, t_target_from_source: t_moved_from_camera.inverse() });
     HoledFrame { start: filled.data().iter().map(|z| to_network(*z)).collect(), holes: known.iter().map(|k| !k).collect() }
 }
 
@@ -80,6 +82,7 @@ pub fn holed_frame(
 mod tests {
     use super::*;
     use crate::correction::{CorrectionConfig, NoCorrection};
+    use crate::inpainting::{Background, PushPull};
     use nalgebra::{Translation3, UnitQuaternion};
 
     const W: u32 = 64;
@@ -125,7 +128,7 @@ mod tests {
         let data: Vec<f32> = (0..w * w).map(|i| if (20..44).contains(&(i % w)) && (20..44).contains(&(i / w)) { near } else { wall }).collect();
         let frame: Vec<f32> = data.iter().map(|z| to_network(*z)).collect();
         let t = Isometry3::from_parts(Translation3::new(-0.1, 0.0, 0.0), UnitQuaternion::identity());
-        let holed = holed_frame(&frame, w, w, k().as_vector(), &t, &NoCorrection);
+        let holed = holed_frame(&frame, w, w, k().as_vector(), &t, &NoCorrection, &PushPull);
         // Moving 0.1 m to +x shifts the box 5 px left and the wall 1.7 px: the wall just left of the box,
         // columns 17..20 of rows inside the box (column c lands at round(c − 1.67), the box at 15..=38),
         // is behind the box from the moved camera; column 16 lands at 14, beside it.
@@ -147,14 +150,39 @@ mod tests {
     }
 
     #[test]
+    fn a_background_start_fills_the_boxs_shadow_with_the_wall() {
+        // The scene above: the shadow next to the box is wall that the moved camera could not see. The
+        // background fill copies the farther border along the motion (the wall, 3 m) where push–pull
+        // blends it with the box (1 m) into depths on neither surface.
+        let (w, wall, near) = (W as usize, 3.0f32, 1.0f32);
+        let data: Vec<f32> = (0..w * w).map(|i| if (20..44).contains(&(i % w)) && (20..44).contains(&(i / w)) { near } else { wall }).collect();
+        let frame: Vec<f32> = data.iter().map(|z| to_network(*z)).collect();
+        let t = Isometry3::from_parts(Translation3::new(-0.1, 0.0, 0.0), UnitQuaternion::identity());
+        let background = holed_frame(&frame, w, w, k().as_vector(), &t, &NoCorrection, &Background);
+        let push_pull = holed_frame(&frame, w, w, k().as_vector(), &t, &NoCorrection, &PushPull);
+        assert_eq!(background.holes, push_pull.holes, "the holes do not depend on the fill");
+        let row = 32;
+        for c in 17..20 {
+            let i = row * w + c;
+            assert!((from_network(background.start[i]) - wall).abs() < 1e-3, "column {c}: {}", from_network(background.start[i]));
+            assert!(from_network(push_pull.start[i]) < wall - 0.05, "push-pull blends column {c}");
+        }
+        for (i, h) in background.holes.iter().enumerate() {
+            if !h {
+                assert_eq!(background.start[i], push_pull.start[i], "known pixel {i} is kept as it is");
+            }
+        }
+    }
+
+    #[test]
     fn the_corrector_drops_pixels_into_the_holes() {
         // A wall with one pixel 20 cm behind it (a penetration, as a re-projection can leave): the official
         // min-pool filter drops it, so it is a hole; without correction it is not.
         let w = W as usize;
         let mut data = vec![to_network(2.0); w * w];
         data[32 * w + 32] = to_network(2.2);
-        let none = holed_frame(&data, w, w, k().as_vector(), &Isometry3::identity(), &NoCorrection);
-        let min_pool = holed_frame(&data, w, w, k().as_vector(), &Isometry3::identity(), &*CorrectionConfig::OFFICIAL_MIN_POOL.build());
+        let none = holed_frame(&data, w, w, k().as_vector(), &Isometry3::identity(), &NoCorrection, &PushPull);
+        let min_pool = holed_frame(&data, w, w, k().as_vector(), &Isometry3::identity(), &*CorrectionConfig::OFFICIAL_MIN_POOL.build(), &PushPull);
         assert!(!none.holes.iter().any(|h| *h));
         assert_eq!(min_pool.holes.iter().filter(|h| **h).count(), 1);
         assert!(min_pool.holes[32 * w + 32]);

@@ -13,6 +13,7 @@ use crate::diffusion::schedule::Schedule;
 use crate::correction::{CorrectionConfig, Corrector};
 use crate::error::{Error, Result};
 use crate::geometry::PivotPoseSampler;
+use crate::inpainting::{Background, Inpainter, PushPull, Start};
 use crate::nn::denoiser::{Denoiser, DenoiserConfig};
 use crate::nn::unet::{parameter_count, Preset};
 use crate::rng::Rng;
@@ -61,6 +62,9 @@ pub struct DiffusionTrainOptions {
     /// from `start = "push_pull"` at a small start step (with `max_t`).
     pub holes: bool,
     pub hole_weight: f64,
+    /// The classical fill of the holes, as the sampler's `start` will fill them (push–pull or background;
+    /// `noise` is not a fill and is refused).
+    pub hole_start: Start,
     /// The corrections a holed frame goes through, one drawn per frame (as the build's
     /// `[correct.condition]` drops pixels from a re-projected view before the fill).
     pub hole_corrections: Vec<CorrectionConfig>,
@@ -104,6 +108,7 @@ impl DiffusionTrainOptions {
             max_t: None,
             holes: false,
             hole_weight: 4.0,
+            hole_start: Start::PushPull,
             hole_corrections: vec![CorrectionConfig::None, CorrectionConfig::OFFICIAL_MIN_POOL],
             ema_beta: 0.995,
             ema_every: 10,
@@ -145,6 +150,9 @@ impl DiffusionTrainOptions {
             if self.hole_corrections.is_empty() {
                 return bad("--holes-correction", "hole-aware training needs at least one correction".into());
             }
+            if self.hole_start == Start::Noise {
+                return bad("--holes-start", "must be a classical fill (push-pull or background), the start a holed frame is noised from".into());
+            }
             for c in &self.hole_corrections {
                 c.validate("--holes-correction")?;
             }
@@ -185,10 +193,11 @@ fn make_batch(data: &FrameSet, opts: &DiffusionTrainOptions, correctors: &[Box<d
             (f, x0, y0, flip, holes)
         })
         .collect();
+    let fill: &dyn Inpainter = if opts.hole_start == Start::Background { &Background } else { &PushPull };
     let holed: Vec<_> = draws
         .par_iter()
         .map(|(f, _, _, _, holes)| {
-            holes.map(|(motion, c)| super::holes::holed_frame(&f.depth, w, h, f.intrinsics, &motion, correctors[c].as_ref()))
+            holes.map(|(motion, c)| super::holes::holed_frame(&f.depth, w, h, f.intrinsics, &motion, correctors[c].as_ref(), fill))
         })
         .collect();
     for (i, ((f, x0, y0, flip, _), holed)) in draws.into_iter().zip(holed).enumerate() {
@@ -218,7 +227,7 @@ fn make_batch(data: &FrameSet, opts: &DiffusionTrainOptions, correctors: &[Box<d
 
 /// The hole-aware part of a batch (`DiffusionTrainOptions::holes`).
 pub struct Holes {
-    /// What is noised instead of the clean frame: known depths with push–pull in the holes.
+    /// What is noised instead of the clean frame: known depths with the classical fill in the holes.
     pub start: Tensor,
     /// Per-pixel loss weight: 0 without true depth, `hole_weight` in holes, 1 elsewhere.
     pub weight: Tensor,
