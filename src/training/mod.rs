@@ -10,3 +10,4 @@ pub mod descriptor;
 pub mod diffusion;
 pub mod eval_inpaint;
 pub mod fill_metrics;
+pub mod optim;
