@@ -5,6 +5,7 @@
 //! inference modules ([`crate::nn`], [`crate::diffusion`], [`crate::correction`], [`crate::inpainting`])
 //! and is imported by none of them.
 
+pub mod boost;
 pub mod correction;
 pub mod descriptor;
 pub mod diffusion;
