@@ -19,6 +19,7 @@ use std::path::Path;
 
 /// A training pair with its overlap (the larger of the two directions' fractions, as the validate stage
 /// and the benchmark define it).
+#[derive(Clone)]
 pub struct OverlapPair {
     pub pair: TrainPair,
     pub overlap: f64,

@@ -69,9 +69,11 @@ pub fn unit_dir(out: &Path, c: Condition, seed: u64) -> PathBuf {
 }
 
 pub const SCORES: &str = "scores.tsv";
+/// The keys and overlaps of a unit's training pairs.
+pub const TRAINING_PAIRS: &str = "training-pairs.tsv";
 
 /// A seeded subset of `k` of `pairs` (all when fewer), in their order.
-fn subset(pairs: &[TrainPair], k: usize, rng: &mut Rng) -> Vec<TrainPair> {
+fn subset(pairs: &[OverlapPair], k: usize, rng: &mut Rng) -> Vec<OverlapPair> {
     let mut idx = sample_indices(pairs.len(), k, rng);
     idx.sort_unstable();
     idx.into_iter().map(|i| pairs[i].clone()).collect()
@@ -80,8 +82,8 @@ fn subset(pairs: &[TrainPair], k: usize, rng: &mut Rng) -> Vec<TrainPair> {
 /// The training pairs: the real ones (matched to the classical generator's overlap histogram) and each
 /// generator's, at most `cfg.pairs` of each.
 struct TrainingData {
-    real: Vec<TrainPair>,
-    generated: BTreeMap<Generator, Vec<TrainPair>>,
+    real: Vec<OverlapPair>,
+    generated: BTreeMap<Generator, Vec<OverlapPair>>,
 }
 
 fn prepare_data(cfg: &BoostConfig, todo: &[Condition], notes: &mut Vec<String>, log: &mut dyn FnMut(&str)) -> Result<TrainingData> {
@@ -124,14 +126,13 @@ fn prepare_data(cfg: &BoostConfig, todo: &[Condition], notes: &mut Vec<String>, 
             m.indices.len(),
             if m.complete { String::new() } else { format!(" (fewer than --pairs {}: the scarcest bin allows no more at this histogram)", cfg.pairs) }
         ));
-        real = m.indices.iter().map(|&i| candidates[i].pair.clone()).collect();
+        real = m.indices.iter().map(|&i| candidates[i].clone()).collect();
     }
-    let generated = all.into_iter().map(|(g, v)| (g, v.into_iter().map(|p| p.pair).collect())).collect();
-    Ok(TrainingData { real, generated })
+    Ok(TrainingData { real, generated: all })
 }
 
 /// The pairs condition `c` trains on.
-fn condition_pairs(c: Condition, data: &TrainingData, seed: u64) -> Vec<TrainPair> {
+fn condition_pairs(c: Condition, data: &TrainingData, seed: u64) -> Vec<OverlapPair> {
     let empty = Vec::new();
     let generated = c.generator().and_then(|g| data.generated.get(&g)).unwrap_or(&empty);
     let (r, g) = c.mix(data.real.len(), generated.len());
@@ -176,6 +177,10 @@ pub fn run_boost(cfg: &BoostConfig, log: &mut dyn FnMut(&str)) -> Result<BoostRe
             let pairs = condition_pairs(c, data.as_ref().expect("prepared"), cfg.classical.seed);
             bar.set_message(format!("{} seed {k}: training on {} pairs", c.name(), pairs.len()));
             log(&format!("{} seed {k}: training on {} pairs", c.name(), pairs.len()));
+            std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
+            let listing: String = pairs.iter().map(|p| format!("{}\t{}\n", p.pair.key, p.overlap)).collect();
+            write_atomic(&dir, &dir.join(TRAINING_PAIRS), format!("key\toverlap\n{listing}").as_bytes(), Publish::Replace)?;
+            let pairs: Vec<TrainPair> = pairs.into_iter().map(|p| p.pair).collect();
             let opts = DescriptorTrainOptions { seed: k, out: dir.clone(), resume: true, progress: false, ..cfg.train.clone() };
             train_descriptor(&pairs, &opts, |_| {})?;
             let path = dir.join(LATEST);
