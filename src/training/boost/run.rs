@@ -159,8 +159,9 @@ pub fn run_boost(cfg: &BoostConfig, log: &mut dyn FnMut(&str)) -> Result<BoostRe
     if benches.is_empty() {
         return Err(Error::input(&cfg.bench, "no benchmark pairs to score (check --only)"));
     }
+    // Seed-major: every condition's seed 0 first, so an interrupted run has compared all conditions once.
     let units: Vec<(Condition, u64)> =
-        cfg.conditions.iter().flat_map(|&c| if c.trains() { (0..cfg.seeds).collect::<Vec<_>>() } else { vec![0] }.into_iter().map(move |k| (c, k))).collect();
+        (0..cfg.seeds).flat_map(|k| cfg.conditions.iter().filter(move |c| c.trains() || k == 0).map(move |&c| (c, k))).collect();
     let todo: Vec<(Condition, u64)> = units.iter().copied().filter(|&(c, k)| !unit_dir(&cfg.out, c, k).join(SCORES).exists()).collect();
     let mut notes = Vec::new();
     let data = if todo.iter().any(|(c, _)| c.trains()) {
@@ -195,7 +196,9 @@ pub fn run_boost(cfg: &BoostConfig, log: &mut dyn FnMut(&str)) -> Result<BoostRe
     }
     bar.finish_and_clear();
     let mut results: BTreeMap<Condition, Vec<Vec<PairScore>>> = BTreeMap::new();
-    for &(c, k) in &units {
+    let mut by_condition = units.clone();
+    by_condition.sort();
+    for &(c, k) in &by_condition {
         results.entry(c).or_default().push(scores_file::read(&unit_dir(&cfg.out, c, k).join(SCORES))?);
     }
     let (table, paired) = summarize(&results);
