@@ -143,3 +143,42 @@ fn resume_continues_exactly_and_bad_input_is_refused() {
     let o = train(&missing, &dir.path().join("x"), 5, &[]);
     assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("nowhere"), "{}", String::from_utf8_lossy(&o.stderr));
 }
+
+/// `eval registration` with a checkpoint describes only the points some sample count draws: the scores
+/// (IR, RANSAC, the official error, per pair and count) equal those of describing every point, and a
+/// keypoint's row equals its row when the whole cloud is described.
+#[test]
+fn describing_only_the_sampled_points_gives_the_same_scores() {
+    use pointreggpt::registration::benchmark::find_benchmarks;
+    use pointreggpt::registration::{evaluate, Descriptor, EvalConfig};
+    let dir = tempfile::tempdir().unwrap();
+    let (seq, bench) = (dir.path().join("seq"), dir.path().join("bench"));
+    assert!(bin().args(["synth", "--out", seq.to_str().unwrap(), "--frames", "40", "--seed", "400"]).output().unwrap().status.success());
+    let o = bin().args(["fragments", seq.join("synthetic-400").to_str().unwrap(), "--single-frames", "--out", bench.to_str().unwrap(), "--quiet"]).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let run = dir.path().join("run");
+    let o = train(&bench, &run, 2, &["--points", "16"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let checkpoint = run.join("latest.safetensors");
+    let d = Descriptor::parse(checkpoint.to_str().unwrap(), "--descriptor").unwrap();
+
+    let benches = find_benchmarks(&bench).unwrap();
+    let b = benches.iter().max_by_key(|b| b.pairs.len()).unwrap();
+    assert!(b.pairs.len() >= 3, "{} pairs", b.pairs.len());
+    let sampled = EvalConfig { samples: vec![200, 50], voxel: 0.06, ..Default::default() };
+    let all = EvalConfig { describe_all: true, ..sampled.clone() };
+    let (a, e) = (evaluate(b, &[d.clone()], &sampled, &mut || {}).unwrap(), evaluate(b, &[d.clone()], &all, &mut || {}).unwrap());
+    assert_eq!(a[0].len(), 2 * b.pairs.len());
+    assert_eq!(format!("{a:?}"), format!("{e:?}"), "scores differ when every point is described");
+
+    // The rows themselves, on one cloud: describing 200 of its points gives their rows of the full description.
+    let cloud = pointreggpt::geometry::voxel_downsample(&pointreggpt::ply::read_ply(&b.pairs[0].source_path).unwrap(), 0.025);
+    assert!(cloud.len() > 1000, "a cloud much larger than the sample: {}", cloud.len());
+    let keys: Vec<usize> = (0..cloud.len()).step_by(cloud.len() / 200).collect();
+    let (full, some) = (d.describe(&cloud), d.describe_at(&cloud, &keys));
+    for (r, &k) in keys.iter().enumerate() {
+        for c in 0..full.dim {
+            assert!((full.row(k)[c] - some.row(r)[c]).abs() < 1e-5, "point {k} component {c}: {} vs {}", full.row(k)[c], some.row(r)[c]);
+        }
+    }
+}

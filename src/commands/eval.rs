@@ -23,6 +23,9 @@ pub enum EvalWhat {
     /// The 3DMatch registration protocol (FMR, IR, RR, RRE, RTE) on a benchmark folder with a descriptor,
     /// and the paired IR difference against a second one (`--compare`).
     Registration(super::eval_registration::EvalRegistrationArgs),
+    /// Does a training set make registration better? Trains the patch descriptor on each condition (real,
+    /// generated, real + generated pairs; several seeds) and scores all on one benchmark: one table.
+    Boost(super::eval_boost::EvalBoostArgs),
 }
 
 #[derive(Debug, clap::Args)]
@@ -149,6 +152,7 @@ pub fn run(args: &EvalArgs, out: &mut dyn Write) -> Result<()> {
         EvalWhat::Correction(a) => run_correction(a, out),
         EvalWhat::Inpaint(a) => run_inpaint(a, out),
         EvalWhat::Registration(a) => super::eval_registration::run(a, out),
+        EvalWhat::Boost(a) => super::eval_boost::run(a, out),
     }
 }
 

@@ -15,4 +15,5 @@ pub mod train;
 pub mod train_descriptor;
 pub mod eval;
 pub mod eval_registration;
+pub mod eval_boost;
 pub mod fragments;

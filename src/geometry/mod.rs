@@ -1,5 +1,5 @@
 //! Pure geometry: intrinsics, depth maps, SE(3) poses, z-buffer projection, crops, voxels, overlap,
-//! nearest-neighbour distances.
+//! fixed-radius neighbour search.
 //!
 //! Units: metres (`f32` for points and depth, `f64` for poses and intrinsics). Pixel convention (the
 //! official code's): pixel (column c, row r) has the integer coordinate (c, r), so a point projects to
@@ -14,13 +14,15 @@ pub mod overlap_estimate;
 pub mod pose;
 pub mod pose_sampling;
 pub mod projection;
+pub mod radius_index;
 pub mod voxel;
 
 pub use crop::AxisBox;
 pub use depth::{backproject, backproject_with_pixels, DepthMap, DepthRange};
 pub use depth_filters::valid_min3x3;
 pub use intrinsics::{Intrinsics, ResizeCrop};
-pub use overlap::{overlap, Overlap, RadiusIndex};
+pub use overlap::{overlap, Overlap};
+pub use radius_index::RadiusIndex;
 pub use overlap_estimate::view_overlap;
 pub use pose::{pose_from_rows, pose_to_rows, relative_pose, transform_points};
 pub use pose_sampling::PivotPoseSampler;

@@ -93,6 +93,19 @@ impl Descriptor {
             Descriptor::Learned { model, .. } => Features { dim: model.dim(), data: model.describe(points, points) },
         }
     }
+
+    /// The rows of [`Descriptor::describe`] at `keypoints` (indices into `points`), in that order. FPFH
+    /// still needs every point's histogram (each FPFH mixes its neighbours'); a patch network describes
+    /// only the keypoints.
+    pub fn describe_at(&self, points: &[Point], keypoints: &[usize]) -> Features {
+        match self {
+            Descriptor::Fpfh { .. } => self.describe(points).select(keypoints),
+            Descriptor::Learned { model, .. } => {
+                let keys: Vec<Point> = keypoints.iter().map(|&k| points[k]).collect();
+                Features { dim: model.dim(), data: model.describe(points, &keys) }
+            }
+        }
+    }
 }
 
 #[cfg(test)]

@@ -34,6 +34,9 @@ pub struct EvalConfig {
     /// pairing points closer than the RANSAC distance.
     pub icp_iterations: usize,
     pub seed: u64,
+    /// Describe every point of every cloud instead of only the points some sample count draws (slower,
+    /// the same scores: the check that describing only the sampled points changes nothing).
+    pub describe_all: bool,
 }
 
 impl Default for EvalConfig {
@@ -45,6 +48,7 @@ impl Default for EvalConfig {
             ransac: RansacConfig::default(),
             icp_iterations: 0,
             seed: 0,
+            describe_all: false,
         }
     }
 }
@@ -68,11 +72,31 @@ pub struct PairScore {
     pub rte_m: f64,
 }
 
-/// A cloud, downsampled, with each descriptor's rows and (for ICP) its k-d tree.
+/// A cloud, downsampled, with each descriptor's rows for the described points and (for ICP) its k-d tree.
 struct Described {
     points: Vec<Point>,
+    /// `row_of[k]`: the row of point k in every descriptor's features (`u32::MAX`: not described).
+    row_of: Vec<u32>,
     features: Vec<Features>,
     tree: KdTree,
+}
+
+impl Described {
+    /// Descriptor d's rows of the points `indices` (all described).
+    fn rows(&self, d: usize, indices: &[usize]) -> Features {
+        let rows: Vec<usize> = indices.iter().map(|&k| self.row_of[k] as usize).collect();
+        debug_assert!(rows.iter().all(|&r| r != u32::MAX as usize), "a sampled point was not described");
+        self.features[d].select(&rows)
+    }
+}
+
+/// The points of a pair drawn at sample count `n`: (source indices, target indices, the RANSAC seed).
+fn draws(config: &EvalConfig, pair: &BenchPair, n_source: usize, n_target: usize, n: usize) -> (Vec<usize>, Vec<usize>, u64) {
+    let key = format!("{}/{}/{}", pair.scene, pair.i, pair.j);
+    let rng = Rng::new(unit_seed(config.seed, &key, n as u64));
+    let si = sample_indices(n_source, n, &mut rng.fork(0));
+    let ti = sample_indices(n_target, n, &mut rng.fork(1));
+    (si, ti, rng.fork(2).next_u64())
 }
 
 /// `k` distinct indices below `n` (all of them, in order, when `k ≥ n`), drawn by a partial Fisher–Yates.
@@ -97,15 +121,38 @@ pub fn evaluate(
     config: &EvalConfig,
     tick: &mut dyn FnMut(),
 ) -> Result<Vec<Vec<PairScore>>> {
+    // The downsampled clouds, then the points any sample count draws from each (the union over pairs,
+    // roles and counts): only those are described.
+    let mut points: HashMap<PathBuf, Vec<Point>> = HashMap::new();
+    for pair in &bench.pairs {
+        for path in [&pair.source_path, &pair.target_path] {
+            if !points.contains_key(path) {
+                points.insert(path.clone(), voxel_downsample(&crate::ply::read_ply(path)?, config.voxel));
+            }
+        }
+    }
+    let mut wanted: HashMap<PathBuf, Vec<bool>> = points.iter().map(|(p, c)| (p.clone(), vec![config.describe_all; c.len()])).collect();
+    for pair in &bench.pairs {
+        for &n in &config.samples {
+            let (si, ti, _) = draws(config, pair, points[&pair.source_path].len(), points[&pair.target_path].len(), n);
+            for (path, idx) in [(&pair.source_path, si), (&pair.target_path, ti)] {
+                let w = wanted.get_mut(path).expect("loaded");
+                idx.into_iter().for_each(|k| w[k] = true);
+            }
+        }
+    }
     let mut cache: HashMap<PathBuf, Arc<Described>> = HashMap::new();
     let mut load = |path: &PathBuf| -> Result<Arc<Described>> {
         if let Some(d) = cache.get(path) {
             return Ok(d.clone());
         }
-        let points = voxel_downsample(&crate::ply::read_ply(path)?, config.voxel);
-        let features = descriptors.iter().map(|d| d.describe(&points)).collect();
+        let points = points.remove(path).expect("loaded once");
+        let keys: Vec<usize> = (0..points.len()).filter(|&k| wanted[path][k]).collect();
+        let mut row_of = vec![u32::MAX; points.len()];
+        keys.iter().enumerate().for_each(|(r, &k)| row_of[k] = r as u32);
+        let features = descriptors.iter().map(|d| d.describe_at(&points, &keys)).collect();
         let tree = KdTree::from_points(if config.icp_iterations > 0 { &points } else { &[] });
-        let d = Arc::new(Described { points, features, tree });
+        let d = Arc::new(Described { points, row_of, features, tree });
         cache.insert(path.clone(), d.clone());
         Ok(d)
     };
@@ -132,16 +179,12 @@ fn score_pair(
     n: usize,
     config: &EvalConfig,
 ) -> PairScore {
-    let key = format!("{}/{}/{}", pair.scene, pair.i, pair.j);
-    let seed = unit_seed(config.seed, &key, n as u64);
-    let rng = Rng::new(seed);
-    let si = sample_indices(source.points.len(), n, &mut rng.fork(0));
-    let ti = sample_indices(target.points.len(), n, &mut rng.fork(1));
+    let (si, ti, ransac_seed) = draws(config, pair, source.points.len(), target.points.len(), n);
     let sp: Vec<Point> = si.iter().map(|&k| source.points[k]).collect();
     let tp: Vec<Point> = ti.iter().map(|&k| target.points[k]).collect();
-    let corr = match_features(&source.features[d].select(&si), &target.features[d].select(&ti), config.mutual);
+    let corr = match_features(&source.rows(d, &si), &target.rows(d, &ti), config.mutual);
     let ir = inlier_ratio(&sp, &tp, &corr, &pair.t_i_from_j);
-    let rc = RansacConfig { seed: rng.fork(2).next_u64(), ..config.ransac.clone() };
+    let rc = RansacConfig { seed: ransac_seed, ..config.ransac.clone() };
     let (error, rre, rte) = match ransac(&sp, &tp, &corr, &rc) {
         Some(r) => {
             let mut t = r.t_target_from_source;

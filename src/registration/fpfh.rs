@@ -3,8 +3,7 @@
 //! within the radius), SPFH of each point over its neighbours, then FPFH = SPFH + the neighbours' SPFH
 //! weighted by 1/d² and normalised to 100 per angle. Several radii concatenate (multi-scale).
 
-use super::grid::RadiusGrid;
-use crate::geometry::Point;
+use crate::geometry::{Point, RadiusIndex};
 use nalgebra::Vector3;
 use rayon::prelude::*;
 use std::f64::consts::PI;
@@ -51,7 +50,7 @@ pub fn fpfh(points: &[Point], normals: &[Vector3<f32>], radius: f32, max_nn: usi
     let p64 = |i: usize| points[i].coords.cast::<f64>();
     let n64 = |i: usize| normals[i].cast::<f64>();
     // Neighbourhoods once: each point's list (sorted by distance, the point itself first).
-    let grid = RadiusGrid::new(points, radius);
+    let grid = RadiusIndex::new(points, radius);
     let neighbours: Vec<Vec<(u32, f32)>> = points
         .par_iter()
         .map(|p| {

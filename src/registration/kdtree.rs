@@ -205,4 +205,22 @@ mod tests {
             }
         }
     }
+
+    #[test]
+    fn hybrid_gives_the_radius_index_answers() {
+        let mut rng = Rng::new(9);
+        let pts: Vec<crate::geometry::Point> = (0..3000)
+            .map(|_| crate::geometry::Point::new(rng.uniform() as f32 - 0.5, rng.uniform() as f32 * 2.0, (rng.uniform() as f32 * 20.0).floor() * 0.05))
+            .collect();
+        let tree = KdTree::from_points(&pts);
+        let index = crate::geometry::RadiusIndex::new(&pts, 0.1);
+        let (mut a, mut b) = (Vec::new(), Vec::new());
+        for q in pts.iter().step_by(7) {
+            for nn in [1, 10, 100] {
+                index.hybrid(q, nn, &mut a);
+                tree.hybrid(&[q.x, q.y, q.z], 0.1, nn, &mut b);
+                assert_eq!(a, b);
+            }
+        }
+    }
 }

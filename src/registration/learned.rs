@@ -1,7 +1,7 @@
 //! A trained patch descriptor: its checkpoint format (safetensors, the configuration in the header's
 //! metadata under [`META_KEY`]) and the describing of keypoints of a cloud.
 
-use super::patch::{patches, PatchConfig};
+use super::patch::{PatchCloud, PatchConfig};
 use crate::error::{Error, Result};
 use crate::geometry::Point;
 use crate::nn::checkpoint::{read_header, read_tensors, write_safetensors};
@@ -101,12 +101,14 @@ impl LearnedDescriptor {
     }
 }
 
-/// Descriptors of `keypoints` in `cloud` by `net` on patches made with `patch` (no gradients).
+/// Descriptors of `keypoints` in `cloud` by `net` on patches made with `patch` (no gradients; the
+/// cloud's radius indexes are built once).
 pub fn describe_with(net: &PatchNet, patch: &PatchConfig, cloud: &[Point], keypoints: &[Point]) -> Vec<f32> {
     let n = patch.voxels as i64;
+    let indexed = PatchCloud::new(cloud, patch);
     let mut out = Vec::with_capacity(keypoints.len() * net.config.dim as usize);
     for chunk in keypoints.chunks(BATCH) {
-        let x = Tensor::from_slice(&patches(cloud, chunk, patch)).view([chunk.len() as i64, 1, n, n, n]);
+        let x = Tensor::from_slice(&indexed.patches(chunk)).view([chunk.len() as i64, 1, n, n, n]);
         let d = tch::no_grad(|| net.forward(&x));
         out.extend(Vec::<f32>::try_from(d.flatten(0, -1)).expect("float descriptors"));
     }

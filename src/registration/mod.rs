@@ -1,7 +1,7 @@
 //! The registration instrument: does a dataset make registration better? Classical registration as pure
 //! functions (rayon inside), the official 3DMatch metrics, and the benchmark files and protocol.
 //!
-//! Files: [`kdtree`] (neighbour search in 3D and feature space), [`grid`] (fixed-radius search in 3D), [`normals`] (PCA, oriented to the
+//! Files: [`kdtree`] (neighbour search in 3D and feature space), [`normals`] (PCA, oriented to the
 //! camera), [`fpfh`] (33-bin FPFH, multi-scale), [`matching`] (nearest / mutual nearest descriptors),
 //! [`ransac`] (seeded, thread-count independent) and [`icp`] (point-to-point refinement), [`metrics`]
 //! (IR, FMR, the official RR error, RRE / RTE, information matrices), [`descriptor`] (what
@@ -14,7 +14,6 @@ pub mod benchmark;
 pub mod descriptor;
 pub mod evaluate;
 pub mod fpfh;
-pub mod grid;
 pub mod icp;
 pub mod kdtree;
 pub mod learned;

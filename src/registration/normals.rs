@@ -1,8 +1,7 @@
 //! Surface normals by PCA over a neighbourhood (Open3D's `estimate_normals` with a hybrid search),
 //! oriented towards the camera at the origin of the cloud's frame.
 
-use super::grid::RadiusGrid;
-use crate::geometry::Point;
+use crate::geometry::{Point, RadiusIndex};
 use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
 
@@ -11,7 +10,7 @@ use rayon::prelude::*;
 /// the origin (`n·(0 − p) ≥ 0`). A point with fewer than 3 neighbours gets (0, 0, 1) before
 /// orientation, as Open3D does.
 pub fn estimate_normals(points: &[Point], radius: f32, max_nn: usize) -> Vec<Vector3<f32>> {
-    let grid = RadiusGrid::new(points, radius);
+    let grid = RadiusIndex::new(points, radius);
     points
         .par_iter()
         .map_init(Vec::new, |nb, p| {

@@ -56,23 +56,42 @@ impl PatchConfig {
     }
 }
 
-/// The patches of `keypoints` in `cloud`: `keypoints.len() × cfg.len()` values, patch after patch, each
-/// indexed `(i·n + j)·n + k` along the frame's (x, y, z).
+/// A cloud with the two radius indexes its patches need (the local frame's neighbourhood and the
+/// patch's reach): build once per cloud, then describe any number of keypoints.
+pub struct PatchCloud<'a> {
+    cloud: &'a [Point],
+    cfg: PatchConfig,
+    reach: RadiusIndex,
+    frame_index: RadiusIndex,
+}
+
+impl<'a> PatchCloud<'a> {
+    pub fn new(cloud: &'a [Point], cfg: &PatchConfig) -> Self {
+        PatchCloud { cloud, cfg: *cfg, reach: RadiusIndex::new(cloud, cfg.reach_m()), frame_index: RadiusIndex::new(cloud, cfg.lrf_radius_m) }
+    }
+
+    /// The patches of `keypoints`: `keypoints.len() × cfg.len()` values, patch after patch, each indexed
+    /// `(i·n + j)·n + k` along the frame's (x, y, z).
+    pub fn patches(&self, keypoints: &[Point]) -> Vec<f32> {
+        let cloud = self.cloud;
+        let per: Vec<Vec<f32>> = keypoints
+            .par_iter()
+            .map_init(Vec::new, |ids, centre| {
+                self.frame_index.within(centre, ids);
+                let near: Vec<Point> = ids.iter().map(|&i| cloud[i]).collect();
+                let frame = local_frame(centre, &near, self.cfg.lrf_radius_m);
+                self.reach.within(centre, ids);
+                let near: Vec<Point> = ids.iter().map(|&i| cloud[i]).collect();
+                patch(centre, &frame, &near, &self.cfg)
+            })
+            .collect();
+        per.concat()
+    }
+}
+
+/// The patches of `keypoints` in `cloud` (see [`PatchCloud::patches`]; builds the indexes each call).
 pub fn patches(cloud: &[Point], keypoints: &[Point], cfg: &PatchConfig) -> Vec<f32> {
-    let reach = RadiusIndex::new(cloud, cfg.reach_m());
-    let frame_index = RadiusIndex::new(cloud, cfg.lrf_radius_m);
-    let per: Vec<Vec<f32>> = keypoints
-        .par_iter()
-        .map_init(Vec::new, |ids, centre| {
-            frame_index.within(centre, ids);
-            let near: Vec<Point> = ids.iter().map(|&i| cloud[i]).collect();
-            let frame = local_frame(centre, &near, cfg.lrf_radius_m);
-            reach.within(centre, ids);
-            let near: Vec<Point> = ids.iter().map(|&i| cloud[i]).collect();
-            patch(centre, &frame, &near, cfg)
-        })
-        .collect();
-    per.concat()
+    PatchCloud::new(cloud, cfg).patches(keypoints)
 }
 
 /// One patch: `points` (those within [`PatchConfig::reach_m`] of `centre`; others are ignored) in the

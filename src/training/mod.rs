@@ -5,8 +5,10 @@
 //! inference modules ([`crate::nn`], [`crate::diffusion`], [`crate::correction`], [`crate::inpainting`])
 //! and is imported by none of them.
 
+pub mod boost;
 pub mod correction;
 pub mod descriptor;
 pub mod diffusion;
 pub mod eval_inpaint;
 pub mod fill_metrics;
+pub mod optim;

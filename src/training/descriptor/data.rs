@@ -18,6 +18,7 @@ use std::sync::Arc;
 pub const BENCH_VOXEL_M: f32 = 0.025;
 
 /// One pair: two clouds (each in its own camera frame) and the pose that maps the source into the target.
+#[derive(Clone)]
 pub struct TrainPair {
     pub key: String,
     pub source: Vec<Point>,

@@ -10,7 +10,7 @@ use crate::error::{Error, Result};
 use crate::geometry::{Point, RadiusIndex};
 use crate::nn::patch_net::{PatchNet, PatchNetConfig};
 use crate::rng::Rng;
-use crate::training::diffusion::optim::Adam;
+use crate::training::optim::Adam;
 use serde::Serialize;
 use std::io::Write;
 use std::path::PathBuf;

@@ -1,13 +1,13 @@
 //! Training of the denoiser (reference §5.3): x0 objective, SNR-weighted L1 (official) or min-SNR, Adam
 //! with gradient-norm clipping and accumulation, horizontal flips, EMA, checkpoints with resume.
 //!
-//! Adam and the EMA ([`super::optim`]) are written out (a few tensor ops) so that their state goes into
+//! Adam and the EMA ([`crate::training::optim`]) are written out (a few tensor ops) so that their state goes into
 //! the checkpoint: a resumed run continues exactly where the interrupted one stopped. Every random draw
 //! of step `s` comes from the seed and `s` alone (batch, crops, flips from [`Rng`], time steps and noise from libtorch's generator
 //! reseeded per step), so a resumed run equals an uninterrupted one.
 
 use super::data::FrameSet;
-use super::optim::{ema_update, Adam};
+use crate::training::optim::{ema_update, Adam};
 use crate::diffusion::checkpoint::{self, sorted_variables, DiffusionMeta, EMA, ONLINE};
 use crate::diffusion::schedule::Schedule;
 use crate::correction::{CorrectionConfig, Corrector};

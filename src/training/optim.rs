@@ -1,5 +1,6 @@
-//! The denoiser's optimiser and weight average, written out so their state can be checkpointed: Adam with
-//! bias correction and gradient-norm clipping, and the EMA of ema_pytorch 0.2.2 (reference §5.3).
+//! The trainers' optimiser and weight average, written out so their state can be checkpointed: Adam with
+//! bias correction and gradient-norm clipping (the denoiser's and the descriptor's), and the EMA of
+//! ema_pytorch 0.2.2 (the denoiser's, reference §5.3).
 
 use crate::diffusion::checkpoint::Named;
 use tch::{Kind, Tensor};

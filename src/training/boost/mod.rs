@@ -1,0 +1,18 @@
+//! `pointreggpt eval boost`: does a training set make a learned descriptor register better? Each
+//! training condition (raw FPFH, real pairs, generated pairs of several pipelines, real + generated)
+//! trains the patch descriptor with several seeds and is scored on the same benchmark with the same
+//! RANSAC seeds; one table with the spread over seeds and paired IR differences with 95 % intervals.
+//!
+//! Files: [`conditions`] (C0–C6 and what each trains on), [`histogram`] (real pairs subsampled to the
+//! generated overlap histogram), [`data`] (the real and generated training pairs), [`scores_file`]
+//! (one unit's scores, written atomically), [`table`] (the summary) and [`run`] (the resumable protocol).
+
+pub mod conditions;
+pub mod data;
+pub mod histogram;
+pub mod run;
+pub mod scores_file;
+pub mod table;
+
+pub use conditions::Condition;
+pub use run::{run_boost, BoostConfig};

@@ -1,0 +1,216 @@
+//! The boost protocol as one resumable run: the training pairs of every condition, one descriptor per
+//! condition and training seed in `<out>/<condition>/seed-<k>/`, each scored on the same benchmark with
+//! the same sampling and RANSAC seeds, and the table. A unit (condition × seed) is done when its
+//! `scores.tsv` exists (written atomically, after training finished), so a rerun skips it; an
+//! interrupted training resumes from its last checkpoint.
+
+use super::conditions::{Condition, Generator};
+use super::data::{generated_pairs, generator_config, open_one, real_pairs, OverlapPair};
+use super::histogram::{histogram, match_histogram, EDGES};
+use super::scores_file;
+use super::table::{format_csv, format_paired_csv, format_text, summarize};
+use crate::atomic::{write_atomic, Publish};
+use crate::error::{Error, Result};
+use crate::pipeline::BuildConfig;
+use crate::registration::benchmark::{find_benchmarks, Benchmark};
+use crate::registration::evaluate::sample_indices;
+use crate::registration::{evaluate, Descriptor, EvalConfig, PairScore};
+use crate::rng::Rng;
+use crate::training::descriptor::data::TrainPair;
+use crate::training::descriptor::train::{train_descriptor, DescriptorTrainOptions, LATEST};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+/// Everything a boost run needs.
+pub struct BoostConfig {
+    /// The posed training sequence and its frames `first .. first + frames`.
+    pub sequence: PathBuf,
+    pub first: usize,
+    pub frames: usize,
+    /// Real pairs: a source frame every `real_every` frames, partners `real_gaps` frames later.
+    pub real_every: usize,
+    pub real_gaps: Vec<usize>,
+    /// The evaluation benchmark folder, and the benchmarks of it to score (empty: all).
+    pub bench: PathBuf,
+    pub only: Vec<String>,
+    pub conditions: Vec<Condition>,
+    pub seeds: u64,
+    /// Training pairs per condition (C5/C6: C1's count; the 2x variants double it).
+    pub pairs: usize,
+    /// The descriptor training settings (`out`, `seed`, `resume` are set per unit).
+    pub train: DescriptorTrainOptions,
+    pub eval: EvalConfig,
+    /// The classical generator's pipeline config (C3; C2 and C4 override its correction and fill).
+    pub classical: BuildConfig,
+    /// Folder of the neural generator's checkpoints.
+    pub models: PathBuf,
+    pub out: PathBuf,
+    pub progress: bool,
+}
+
+/// What a run did.
+pub struct BoostReport {
+    /// The table (text), also in `<out>/boost.txt`.
+    pub text: String,
+    /// Facts about the data (pair counts, histogram matching).
+    pub notes: Vec<String>,
+    pub units_run: usize,
+    pub units_skipped: usize,
+}
+
+/// `<out>/<condition>/seed-<k>` (C0, untrained: `<out>/C0`).
+pub fn unit_dir(out: &Path, c: Condition, seed: u64) -> PathBuf {
+    if c.trains() {
+        out.join(c.name()).join(format!("seed-{seed}"))
+    } else {
+        out.join(c.name())
+    }
+}
+
+pub const SCORES: &str = "scores.tsv";
+/// The keys and overlaps of a unit's training pairs.
+pub const TRAINING_PAIRS: &str = "training-pairs.tsv";
+
+/// A seeded subset of `k` of `pairs` (all when fewer), in their order.
+fn subset(pairs: &[OverlapPair], k: usize, rng: &mut Rng) -> Vec<OverlapPair> {
+    let mut idx = sample_indices(pairs.len(), k, rng);
+    idx.sort_unstable();
+    idx.into_iter().map(|i| pairs[i].clone()).collect()
+}
+
+/// The training pairs: the real ones (matched to the classical generator's overlap histogram) and each
+/// generator's, at most `cfg.pairs` of each.
+struct TrainingData {
+    real: Vec<OverlapPair>,
+    generated: BTreeMap<Generator, Vec<OverlapPair>>,
+}
+
+fn prepare_data(cfg: &BoostConfig, todo: &[Condition], notes: &mut Vec<String>, log: &mut dyn FnMut(&str)) -> Result<TrainingData> {
+    let mut gens: Vec<Generator> = todo.iter().filter_map(|c| c.generator()).collect();
+    if todo.iter().any(|c| c.uses_real()) {
+        gens.push(Generator::Classical); // the reference histogram of C1
+    }
+    gens.sort();
+    gens.dedup();
+    let samples_per_frame = ((cfg.pairs as f64 * 1.25 / cfg.frames.max(1) as f64).ceil() as u32).max(1);
+    let mut all: BTreeMap<Generator, Vec<OverlapPair>> = BTreeMap::new();
+    for g in gens {
+        log(&format!("building the {} generator's pairs ({} per frame of {} frames)", g.name(), samples_per_frame, cfg.frames));
+        let config = generator_config(&cfg.classical, g, &cfg.models, &cfg.sequence, cfg.first, cfg.frames, samples_per_frame)?;
+        let pairs = generated_pairs(&config, &cfg.out.join("data").join(g.name()), cfg.progress)?;
+        let mut idx = sample_indices(pairs.len(), cfg.pairs, &mut Rng::new(config.seed).fork(g as u64));
+        idx.sort_unstable();
+        let mut keep = vec![false; pairs.len()];
+        idx.iter().for_each(|&i| keep[i] = true);
+        let chosen: Vec<OverlapPair> = pairs.into_iter().zip(keep).filter(|(_, k)| *k).map(|(p, _)| p).collect();
+        notes.push(format!("{}: {} generated pairs{}", g.name(), chosen.len(), if chosen.len() < cfg.pairs { " (all the build made: fewer than --pairs)" } else { "" }));
+        all.insert(g, chosen);
+    }
+    let mut real = Vec::new();
+    if todo.iter().any(|c| c.uses_real()) {
+        let seq = open_one(&cfg.sequence)?;
+        log(&format!("making the real pairs of frames {}..{}", cfg.first, cfg.first + cfg.frames));
+        let bar = crate::runtime::progress::bar(cfg.frames as u64, cfg.progress, "frames");
+        let candidates = real_pairs(&seq, cfg.first, cfg.frames, cfg.real_every, &cfg.real_gaps, &mut || bar.inc(1))?;
+        bar.finish_and_clear();
+        let reference: Vec<f64> = all[&Generator::Classical].iter().map(|p| p.overlap).collect();
+        let overlaps: Vec<f64> = candidates.iter().map(|p| p.overlap).collect();
+        let m = match_histogram(&overlaps, &reference, &EDGES, cfg.pairs, &mut Rng::new(cfg.classical.seed).fork(77));
+        notes.push(format!(
+            "real: {} candidate pairs (overlap histogram {:?} over bins from 10 % by 10 %); the classical pairs' histogram {:?}; \
+             {} real pairs drawn to it{}",
+            candidates.len(),
+            histogram(&overlaps, &EDGES),
+            histogram(&reference, &EDGES),
+            m.indices.len(),
+            if m.complete { String::new() } else { format!(" (fewer than --pairs {}: the scarcest bin allows no more at this histogram)", cfg.pairs) }
+        ));
+        real = m.indices.iter().map(|&i| candidates[i].clone()).collect();
+    }
+    Ok(TrainingData { real, generated: all })
+}
+
+/// The pairs condition `c` trains on.
+fn condition_pairs(c: Condition, data: &TrainingData, seed: u64) -> Vec<OverlapPair> {
+    let empty = Vec::new();
+    let generated = c.generator().and_then(|g| data.generated.get(&g)).unwrap_or(&empty);
+    let (r, g) = c.mix(data.real.len(), generated.len());
+    let rng = Rng::new(seed).fork(c as u64);
+    let mut out = subset(&data.real, r, &mut rng.fork(0));
+    out.extend(subset(generated, g, &mut rng.fork(1)));
+    out
+}
+
+fn score_all(benches: &[Benchmark], d: &Descriptor, eval: &EvalConfig) -> Result<Vec<PairScore>> {
+    let mut out = Vec::new();
+    for b in benches {
+        out.extend(evaluate(b, std::slice::from_ref(d), eval, &mut || {})?.remove(0));
+    }
+    Ok(out)
+}
+
+/// Runs (or resumes) the protocol and writes `<out>/boost.txt`, `boost.csv` and `boost-paired.csv`.
+pub fn run_boost(cfg: &BoostConfig, log: &mut dyn FnMut(&str)) -> Result<BoostReport> {
+    if cfg.conditions.is_empty() || cfg.seeds == 0 || cfg.pairs == 0 || cfg.frames == 0 {
+        return Err(Error::config("eval boost", "conditions, --seeds, --pairs and --frames must not be empty or zero"));
+    }
+    let benches: Vec<Benchmark> = find_benchmarks(&cfg.bench)?.into_iter().filter(|b| cfg.only.is_empty() || cfg.only.contains(&b.name)).collect();
+    if benches.is_empty() {
+        return Err(Error::input(&cfg.bench, "no benchmark pairs to score (check --only)"));
+    }
+    // Seed-major: every condition's seed 0 first, so an interrupted run has compared all conditions once.
+    let units: Vec<(Condition, u64)> =
+        (0..cfg.seeds).flat_map(|k| cfg.conditions.iter().filter(move |c| c.trains() || k == 0).map(move |&c| (c, k))).collect();
+    let todo: Vec<(Condition, u64)> = units.iter().copied().filter(|&(c, k)| !unit_dir(&cfg.out, c, k).join(SCORES).exists()).collect();
+    let mut notes = Vec::new();
+    let data = if todo.iter().any(|(c, _)| c.trains()) {
+        let conds: Vec<Condition> = todo.iter().map(|u| u.0).collect();
+        Some(prepare_data(cfg, &conds, &mut notes, log)?)
+    } else {
+        None
+    };
+    let bar = crate::runtime::progress::bar(units.len() as u64, cfg.progress, "units");
+    bar.inc((units.len() - todo.len()) as u64);
+    for &(c, k) in &todo {
+        let dir = unit_dir(&cfg.out, c, k);
+        let descriptor = if c.trains() {
+            let pairs = condition_pairs(c, data.as_ref().expect("prepared"), cfg.classical.seed);
+            bar.set_message(format!("{} seed {k}: training on {} pairs", c.name(), pairs.len()));
+            log(&format!("{} seed {k}: training on {} pairs", c.name(), pairs.len()));
+            std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
+            let listing: String = pairs.iter().map(|p| format!("{}\t{}\n", p.pair.key, p.overlap)).collect();
+            write_atomic(&dir, &dir.join(TRAINING_PAIRS), format!("key\toverlap\n{listing}").as_bytes(), Publish::Replace)?;
+            let pairs: Vec<TrainPair> = pairs.into_iter().map(|p| p.pair).collect();
+            let opts = DescriptorTrainOptions { seed: k, out: dir.clone(), resume: true, progress: false, ..cfg.train.clone() };
+            train_descriptor(&pairs, &opts, |_| {})?;
+            let path = dir.join(LATEST);
+            Descriptor::Learned { model: Arc::new(crate::registration::learned::LearnedDescriptor::load(&path)?), path }
+        } else {
+            Descriptor::Fpfh { radii: vec![crate::registration::descriptor::DEFAULT_FPFH_RADIUS] }
+        };
+        bar.set_message(format!("{} seed {k}: evaluating", c.name()));
+        let scores = score_all(&benches, &descriptor, &cfg.eval)?;
+        scores_file::write(&dir.join(SCORES), &scores)?;
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    let mut results: BTreeMap<Condition, Vec<Vec<PairScore>>> = BTreeMap::new();
+    let mut by_condition = units.clone();
+    by_condition.sort();
+    for &(c, k) in &by_condition {
+        results.entry(c).or_default().push(scores_file::read(&unit_dir(&cfg.out, c, k).join(SCORES))?);
+    }
+    let (table, paired) = summarize(&results);
+    let text = format_text(&table, &paired);
+    for (name, body) in [("boost.txt", text.clone()), ("boost.csv", format_csv(&table)), ("boost-paired.csv", format_paired_csv(&paired))] {
+        write_atomic(&cfg.out, &cfg.out.join(name), body.as_bytes(), Publish::Replace)?;
+    }
+    if !notes.is_empty() {
+        let path = cfg.out.join("data-notes.txt");
+        let mut old = std::fs::read_to_string(&path).unwrap_or_default();
+        old.push_str(&notes.iter().map(|n| format!("{n}\n")).collect::<String>());
+        write_atomic(&cfg.out, &path, old.as_bytes(), Publish::Replace)?;
+    }
+    Ok(BoostReport { text, notes, units_run: todo.len(), units_skipped: units.len() - todo.len() })
+}

@@ -1,0 +1,92 @@
+//! `pointreggpt eval boost` on a tiny synthetic run: it writes the table, the same table twice from
+//! scratch (determinism), a rerun redoes no finished unit, and the real pairs of C1 follow the generated
+//! pairs' overlap histogram (counted here from the dataset's own rows).
+
+mod support;
+
+use pointreggpt::shards::dataset::Dataset;
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use support::bin;
+
+fn run_ok(args: &[&str]) -> String {
+    let o = bin().args(args).output().unwrap();
+    assert!(o.status.success(), "{args:?}: {}", String::from_utf8_lossy(&o.stderr));
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+fn boost(bench: &Path, seq: &Path, out: &Path) -> String {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let classical = root.join("pipelines/paper-3dmatch-classical.toml");
+    let models = root.join("models");
+    run_ok(&[
+        "eval", "boost", bench.to_str().unwrap(), "--sequence", seq.to_str().unwrap(), "--first", "0", "--frames", "30",
+        "--conditions", "C0,C1,C3", "--seeds", "2", "--pairs", "24", "--steps", "3", "--samples", "200,50",
+        "--real-every", "1", "--real-gaps", "2,4,6,8,10,12,14,16,18,20", "--classical-config", classical.to_str().unwrap(),
+        "--models", models.to_str().unwrap(), "--out", out.to_str().unwrap(), "--quiet",
+    ])
+}
+
+fn read_tsv(path: &Path) -> Vec<(String, f64)> {
+    std::fs::read_to_string(path).unwrap().lines().skip(1).map(|l| {
+        let (k, v) = l.split_once('\t').unwrap();
+        (k.to_string(), v.parse().unwrap())
+    }).collect()
+}
+
+#[test]
+fn a_tiny_run_writes_the_table_deterministically_and_resumes_without_redoing_units() {
+    let dir = tempfile::tempdir().unwrap();
+    let (seq_root, bench) = (dir.path().join("seq"), dir.path().join("bench"));
+    run_ok(&["synth", "--out", seq_root.to_str().unwrap(), "--frames", "50", "--seed", "500"]);
+    let seq = seq_root.join("synthetic-500");
+    // The benchmark: single-frame pairs of another synthetic scene, which no training sees.
+    let other = dir.path().join("other");
+    run_ok(&["synth", "--out", other.to_str().unwrap(), "--frames", "40", "--seed", "200"]);
+    run_ok(&["fragments", other.join("synthetic-200").to_str().unwrap(), "--single-frames", "--out", bench.to_str().unwrap(), "--quiet"]);
+
+    let (a, b) = (dir.path().join("a"), dir.path().join("b"));
+    let first = boost(&bench, &seq, &a);
+    assert!(first.contains("5 units run, 0 already done"), "{first}");
+    let table = std::fs::read_to_string(a.join("boost.txt")).unwrap();
+    for want in ["C0 raw FPFH", "C1 real pairs", "C3 classical generator", "C1 - C0", "C3 - C0", "200 samples", "50 samples"] {
+        assert!(table.contains(want), "{want} missing from\n{table}");
+    }
+    let csv = std::fs::read_to_string(a.join("boost.csv")).unwrap();
+    let c3_rows: Vec<&str> = csv.lines().filter(|l| l.split(',').nth(2) == Some("C3")).collect();
+    assert_eq!(c3_rows.len(), 2, "{csv}");
+    assert!(c3_rows.iter().all(|l| l.split(',').nth(3) == Some("2")), "two seeds: {csv}");
+
+    // Resume: nothing is redone (the scores files are not rewritten) and the table is the same.
+    let scores: Vec<PathBuf> = ["C0/scores.tsv", "C1/seed-0/scores.tsv", "C1/seed-1/scores.tsv", "C3/seed-0/scores.tsv", "C3/seed-1/scores.tsv"].iter().map(|p| a.join(p)).collect();
+    let mtimes: Vec<_> = scores.iter().map(|p| std::fs::metadata(p).unwrap().modified().unwrap()).collect();
+    let again = boost(&bench, &seq, &a);
+    assert!(again.contains("0 units run, 5 already done"), "{again}");
+    assert_eq!(mtimes, scores.iter().map(|p| std::fs::metadata(p).unwrap().modified().unwrap()).collect::<Vec<_>>());
+    assert_eq!(std::fs::read_to_string(a.join("boost.txt")).unwrap(), table);
+
+    // Determinism: a second run from scratch gives the same table.
+    boost(&bench, &seq, &b);
+    assert_eq!(std::fs::read_to_string(b.join("boost.txt")).unwrap(), table);
+
+    // C1's real pairs follow C3's overlap histogram: C3's overlaps counted from the dataset's rows, and
+    // every 10 % bin of C1 within one pair of C3's share scaled to C1's count.
+    let rows = Dataset::open(a.join("data/classical")).unwrap().read_pairs().unwrap();
+    let overlap: HashMap<String, f64> = rows.iter().map(|r| (r.pair_key.clone(), r.overlap_source.max(r.overlap_target))).collect();
+    let c3: Vec<f64> = read_tsv(&a.join("C3/seed-0/training-pairs.tsv")).iter().map(|(k, _)| overlap[k]).collect();
+    let c1: Vec<f64> = read_tsv(&a.join("C1/seed-0/training-pairs.tsv")).into_iter().map(|(_, o)| o).collect();
+    assert!(c3.len() >= 10 && c1.len() >= 5, "{} generated, {} real pairs", c3.len(), c1.len());
+    let bins = |v: &[f64]| -> Vec<usize> {
+        let mut h = vec![0usize; 9];
+        for &x in v {
+            assert!((0.1..=1.0).contains(&x), "overlap {x} outside 10-100 %");
+            h[(((x - 0.1) / 0.1).floor() as usize).min(8)] += 1;
+        }
+        h
+    };
+    let (h3, h1) = (bins(&c3), bins(&c1));
+    for b in 0..9 {
+        let share = c1.len() as f64 * h3[b] as f64 / c3.len() as f64;
+        assert!((h1[b] as f64 - share).abs() < 1.0, "bin {b}: {} real pairs, {share:.2} wanted ({h1:?} vs {h3:?})", h1[b]);
+    }
+}
