@@ -67,6 +67,18 @@ pub enum Start {
     Background,
 }
 
+impl Start {
+    /// The classical fill a chain with a start step starts from: the background fill for `background`,
+    /// push–pull otherwise (a `noise` chain with a start step, and hole-aware training's default).
+    pub fn classical_fill(self) -> &'static dyn Inpainter {
+        if self == Start::Background {
+            &Background
+        } else {
+            &PushPull
+        }
+    }
+}
+
 fn official_eta() -> f64 {
     SamplerOptions::OFFICIAL.eta
 }
@@ -190,7 +202,7 @@ impl DiffusionInpainter {
             .map(|(d, known, _)| d.data().iter().zip(known.iter()).map(|(z, k)| *k && to_network(*z) > -1.0).collect())
             .collect();
         // The classical fill a start step noises (in network space).
-        let classical: &dyn Inpainter = if self.start == Start::Background { &Background } else { &PushPull };
+        let classical = self.start.classical_fill();
         let inits: Vec<Vec<f32>> = match self.sampler.start_step {
             None => Vec::new(),
             Some(_) => views

@@ -13,7 +13,7 @@ use crate::diffusion::schedule::Schedule;
 use crate::correction::{CorrectionConfig, Corrector};
 use crate::error::{Error, Result};
 use crate::geometry::PivotPoseSampler;
-use crate::inpainting::{Background, Inpainter, PushPull, Start};
+use crate::inpainting::Start;
 use crate::nn::denoiser::{Denoiser, DenoiserConfig};
 use crate::nn::unet::{parameter_count, Preset};
 use crate::rng::Rng;
@@ -193,7 +193,7 @@ fn make_batch(data: &FrameSet, opts: &DiffusionTrainOptions, correctors: &[Box<d
             (f, x0, y0, flip, holes)
         })
         .collect();
-    let fill: &dyn Inpainter = if opts.hole_start == Start::Background { &Background } else { &PushPull };
+    let fill = opts.hole_start.classical_fill();
     let holed: Vec<_> = draws
         .par_iter()
         .map(|(f, _, _, _, holes)| {
