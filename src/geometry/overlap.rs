@@ -27,21 +27,9 @@ pub fn overlap(source: &[Point], target: &[Point], t_target_from_source: &Isomet
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::geometry::radius_index::tests::{brute_count, cloud};
     use crate::rng::Rng;
     use nalgebra::Vector3;
-
-    fn brute_count(queries: &[Point], points: &[Point], r: f32) -> usize {
-        queries
-            .iter()
-            .filter(|q| points.iter().any(|p| (p.x - q.x) * (p.x - q.x) + (p.y - q.y) * (p.y - q.y) + (p.z - q.z) * (p.z - q.z) < r * r))
-            .count()
-    }
-
-    fn cloud(r: &mut Rng, n: usize, offset: f64) -> Vec<Point> {
-        (0..n)
-            .map(|_| Point::new((r.uniform_range(-1.0, 1.0) + offset) as f32, r.uniform_range(-1.0, 1.0) as f32, r.uniform_range(1.0, 1.2) as f32))
-            .collect()
-    }
 
     #[test]
     fn overlap_is_exact_against_brute_force() {

@@ -171,18 +171,20 @@ impl RadiusIndex {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::rng::Rng;
 
-    fn brute_count(queries: &[Point], points: &[Point], r: f32) -> usize {
+    /// How many `queries` have a point within `r` (brute force; also used by the overlap tests).
+    pub(crate) fn brute_count(queries: &[Point], points: &[Point], r: f32) -> usize {
         queries
             .iter()
             .filter(|q| points.iter().any(|p| (p.x - q.x) * (p.x - q.x) + (p.y - q.y) * (p.y - q.y) + (p.z - q.z) * (p.z - q.z) < r * r))
             .count()
     }
 
-    fn cloud(r: &mut Rng, n: usize, offset: f64) -> Vec<Point> {
+    /// `n` random points in a 2 m × 2 m × 0.2 m slab 1 m ahead, shifted by `offset` along x.
+    pub(crate) fn cloud(r: &mut Rng, n: usize, offset: f64) -> Vec<Point> {
         (0..n)
             .map(|_| Point::new((r.uniform_range(-1.0, 1.0) + offset) as f32, r.uniform_range(-1.0, 1.0) as f32, r.uniform_range(1.0, 1.2) as f32))
             .collect()
