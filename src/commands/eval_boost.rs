@@ -6,6 +6,7 @@ use crate::error::{Error, Result};
 use crate::registration::EvalConfig;
 use crate::training::boost::conditions::parse_list;
 use crate::training::boost::{run_boost, BoostConfig};
+use super::train_descriptor::DescriptorModelArgs;
 use crate::training::descriptor::train::DescriptorTrainOptions;
 use std::io::Write;
 use std::path::PathBuf;
@@ -19,7 +20,7 @@ correction, no fill); C3 the classical generator (--classical-config: min-pool +
 (U-Net correction + the hole-aware diffusion refiner, 1 step from push-pull, checkpoints in --models); C5 = C1 + C3 and C6 = \
 C1 + C4 at C1's pair count (half each); C5x2 / C6x2 at double (all of C1 + as many generated). Generated pairs are built \
 in-process from the training frames with the build pipeline into <out>/data/<generator>/ (--pairs of them, drawn from \
-ceil(1.25 * pairs / frames) views per frame). Each condition x seed trains the patch descriptor (--steps) into \
+ceil(1.25 * pairs / frames) views per frame). Each condition x seed trains the descriptor (--model, --steps) into \
 <out>/<condition>/seed-<k>/ and is scored on every pair of the benchmark folder with the same sampling and RANSAC seeds \
 (--eval-seed). A unit is skipped when its scores.tsv exists: rerun the same command to resume. Writes <out>/boost.txt (the \
 table: FMR / IR / RR mean [min-max] over seeds per condition, benchmark and sample count, and the paired IR differences C1-C0, \
@@ -49,6 +50,9 @@ pub struct EvalBoostArgs {
     /// Descriptor training steps per unit (4 pairs x 64 points each).
     #[arg(long, default_value_t = 800)]
     pub steps: u64,
+    /// The descriptor every unit trains (the patch network by default).
+    #[command(flatten)]
+    pub model: DescriptorModelArgs,
     /// Points sampled from each evaluation cloud, comma-separated.
     #[arg(long, value_delimiter = ',', default_value = "5000,1000,250")]
     pub samples: Vec<usize>,
@@ -92,6 +96,7 @@ pub fn run(a: &EvalBoostArgs, out: &mut dyn Write) -> Result<()> {
     crate::nn::set_torch_threads(a.torch_threads)?;
     let mut train = DescriptorTrainOptions::new(a.out.clone());
     train.steps = a.steps;
+    train.model = a.model.model()?;
     train.checkpoint_every = (a.steps / 4).clamp(1, 100);
     train.validate()?;
     let cfg = BoostConfig {

@@ -1,9 +1,13 @@
 //! Background fill along the epipolar direction: the holes of a re-projection are mostly disocclusions,
 //! surfaces the source camera could not see behind a foreground edge. Along the epipolar line through a
 //! hole pixel (the line on which the camera motion moves every image point), one border of the hole is the
-//! occluding foreground and the other the uncovered background; the fill copies the farther border. When
-//! both borders lie on one surface (depths within [`SAME_SURFACE_REL`]), the hole is a crack or a sensor
-//! gap rather than a disocclusion, and the fill interpolates linearly between them instead.
+//! occluding foreground and the other the uncovered background; the fill copies the farther border. The
+//! motion uncovers only one side: nearer points move farther along [`epipolar_direction`], so the
+//! foreground of a disocclusion is its border on the `+direction` side. A hole whose farther border lies on
+//! that side was not opened by the motion (a sensor gap, a penetration mask), and the fill copies the
+//! nearest known pixel there. When both borders lie on one surface (depths within [`SAME_SURFACE_REL`]),
+//! the hole is a crack or a sensor gap rather than a disocclusion, and the fill interpolates linearly
+//! between them instead.
 
 use super::nearest::nearest_source_indices;
 use super::{InpaintContext, Inpainter};
@@ -14,10 +18,11 @@ use rayon::prelude::*;
 /// Two hole borders whose depths differ by at most this share of the nearer are one surface.
 pub const SAME_SURFACE_REL: f32 = 0.05;
 
-/// Fills each unknown pixel from the two nearest known depths along its epipolar line: the farther one,
-/// or their linear interpolation when both are one surface (the one found when the other side leaves the
-/// image). Where the motion gives no direction (no
-/// translation, or the pixel at the epipole) or no border is found, the nearest known pixel is copied.
+/// Fills each unknown pixel from the two nearest known depths along its epipolar line: the farther one
+/// when it lies on the side the motion uncovers (the `−direction` side), their linear interpolation when
+/// both are one surface, the one found when the other side leaves the image. Where the farther border lies
+/// on the `+direction` side, the motion gives no direction (no translation, or the pixel at the epipole) or
+/// no border is found, the nearest known pixel is copied.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Background;
 
@@ -47,13 +52,17 @@ impl Inpainter for Background {
                 let walk = |dx, dy| first_source(&sources, &free, w, h, c, r, dx, dy);
                 match (walk(dx, dy), walk(-dx, -dy)) {
                     (Some((a, na)), Some((b, nb))) => {
+                        // a: the border where nearer points land (the foreground of a disocclusion).
                         let (za, zb) = (d[a], d[b]);
-                        Some(if (za - zb).abs() <= SAME_SURFACE_REL * za.min(zb) {
+                        if (za - zb).abs() <= SAME_SURFACE_REL * za.min(zb) {
                             // Steps na and nb away on either side: weights by the distance to the other.
-                            (za * nb as f32 + zb * na as f32) / (na + nb) as f32
+                            Some((za * nb as f32 + zb * na as f32) / (na + nb) as f32)
+                        } else if zb > za {
+                            Some(zb)
                         } else {
-                            za.max(zb)
-                        })
+                            // Farther on the side the motion covers: not a disocclusion; nearest pixel.
+                            None
+                        }
                     }
                     (a, b) => a.or(b).map(|(i, _)| d[i]),
                 }
@@ -79,7 +88,11 @@ pub fn epipole(k: &Intrinsics, t_target_from_source: &Isometry3<f64>) -> [f64; 3
 }
 
 /// The epipolar direction at pixel `(c, r)`, scaled so its larger component is 1 (one pixel per step), or
-/// `None` when the motion gives none.
+/// `None` when the motion gives none. It points where nearer points land: a source point at depth `z`
+/// whose ray projects to `m` at infinite depth lands at `p = λ·m + (1 − λ)·ε`, with `ε` the epipole and
+/// `λ = z·a₃ / (z·a₃ + e₃)` (`a₃ > 0` the depth of the rotated ray). Going nearer (smaller `z`) moves `p`
+/// from `m` along `e − m·e₃` (toward `ε` when `e₃ > 0`, away from it when `e₃ < 0`; along `(e₀, e₁)` when
+/// `e₃ = 0`), which is the `(e₀ − c·e₂, e₁ − r·e₂)` below.
 fn epipolar_direction(e: [f64; 3], c: f64, r: f64) -> Option<(f64, f64)> {
     let (dx, dy) = (e[0] - c * e[2], e[1] - r * e[2]);
     let m = dx.abs().max(dy.abs());
@@ -215,6 +228,34 @@ mod tests {
         let out = Background.inpaint(&d, &known, &ctx);
         for i in 0..data.len() {
             assert!((out.data()[i] - data[i]).abs() < 1e-5, "pixel {i}: {} vs {}", out.data()[i], data[i]);
+        }
+    }
+
+    #[test]
+    fn only_the_side_a_disocclusion_uncovers_takes_the_farther_border() {
+        // A near plane (1.5 m, columns < 20) and a far one (3 m, columns >= 29), columns 20..29 unknown.
+        let (w, h) = (48u32, 4u32);
+        let (near, far) = (1.5f32, 3.0f32);
+        let data: Vec<f32> = (0..w * h).map(|i| if i % w < 20 { near } else { far }).collect();
+        let known: Vec<bool> = (0..w * h).map(|i| !(20..29).contains(&(i % w))).collect();
+        let d = DepthMap::new(w, h, data).unwrap();
+        let mut ctx = super::super::test_context(&d);
+        // Points move by +fx·t/z: with t < 0 the near plane moves left farther than the far one and the
+        // gap between them is a disocclusion, whose true depth is the far plane.
+        ctx.t_target_from_source = Isometry3::translation(-0.1, 0.0, 0.0);
+        let out = Background.inpaint(&d, &known, &ctx);
+        for i in (0..w * h).filter(|i| !known[*i as usize]) {
+            assert_eq!(out.data()[i as usize], far, "disocclusion, column {}", i % w);
+        }
+        // With t > 0 the near plane moves right over the far one: no motion uncovers this gap, so each
+        // pixel copies its nearest known pixel (column 24 is as far from 19 as from 29).
+        ctx.t_target_from_source = Isometry3::translation(0.1, 0.0, 0.0);
+        let out = Background.inpaint(&d, &known, &ctx);
+        let nearest = super::super::Nearest.inpaint(&d, &known, &ctx);
+        for i in (0..w * h).filter(|i| !known[*i as usize] && i % w != 24) {
+            let want = if i % w < 24 { near } else { far };
+            assert_eq!(out.data()[i as usize], want, "column {}", i % w);
+            assert_eq!(out.data()[i as usize], nearest.data()[i as usize]);
         }
     }
 

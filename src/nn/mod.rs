@@ -8,7 +8,8 @@
 //!   ResnetBlock with optional FiLM), [`attention`] (linear and full attention, pre-norm residual);
 //! - models: [`unet`] (the skeleton of reference §4.1 / §5.1 with its presets), [`augment`]
 //!   (DepthAugment), [`correction`] (`CorrectionNet`), [`denoiser`] (the diffusion U-Net with time and
-//!   intrinsics FiLM conditioning), [`patch_net`] (the 3D ConvNet of the learned registration descriptor);
+//!   intrinsics FiLM conditioning), the learned registration descriptors: [`patch_net`] (a 3D ConvNet on
+//!   distance-field patches) and [`fpfh_mlp`] (an MLP on multi-scale FPFH);
 //! - [`space`]: metric depth ↔ network values (`z/10`, `2·z/10 − 1`), the one place for those formulas;
 //! - I/O: [`checkpoint`] (safetensors with the config in the header metadata; the authors' key layout),
 //!   [`model_path`].
@@ -22,6 +23,7 @@ pub mod augment;
 pub mod checkpoint;
 pub mod correction;
 pub mod denoiser;
+pub mod fpfh_mlp;
 pub mod init;
 pub mod model_path;
 pub mod norm;
@@ -36,6 +38,11 @@ pub use checkpoint::{load_correction, save_correction, CheckpointMeta};
 pub use correction::{CorrectionNet, CorrectionNetConfig};
 pub use model_path::ModelPath;
 pub use unet::{Preset, Unet, UnetConfig};
+
+/// Each row of `x` (`[B, D]`) divided by its length: unit descriptors.
+pub fn unit_rows(x: &tch::Tensor) -> tch::Tensor {
+    x / x.norm_scalaropt_dim(2.0, [1i64], true).clamp_min(1e-8)
+}
 
 /// Sets libtorch's intra-op threads for this process (`--torch-threads`, at least 1).
 pub fn set_torch_threads(n: i32) -> crate::Result<()> {

@@ -57,8 +57,7 @@ impl PatchNet {
     }
 
     pub fn forward(&self, patches: &Tensor) -> Tensor {
-        let d = self.layers.forward(patches);
-        &d / d.norm_scalaropt_dim(2.0, [1i64], true).clamp_min(1e-8)
+        super::unit_rows(&self.layers.forward(patches))
     }
 }
 

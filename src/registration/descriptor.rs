@@ -1,11 +1,10 @@
 //! The descriptors `eval registration` compares, behind one `--descriptor` value: FPFH at one or
-//! several radii (`fpfh`, `fpfh:0.1`, `fpfh:0.075+0.125+0.2`) or a patch network trained by
-//! `pointreggpt train descriptor` (the path of its checkpoint).
+//! several radii (`fpfh`, `fpfh:0.1`, `fpfh:0.075+0.125+0.2`) or a network trained by
+//! `pointreggpt train descriptor` (the path of its checkpoint: a patch network or an FPFH MLP).
 
-use super::fpfh::fpfh_multi;
+use super::fpfh::{fpfh_features, FPFH_DIM};
 use super::learned::LearnedDescriptor;
 use super::matching::Features;
-use super::normals::estimate_normals;
 use crate::error::{Error, Result};
 use crate::geometry::Point;
 use std::path::{Path, PathBuf};
@@ -13,18 +12,13 @@ use std::sync::Arc;
 
 /// FPFH radius for `fpfh` alone, metres (5 × the 2.5 cm evaluation voxel, Open3D's usual choice).
 pub const DEFAULT_FPFH_RADIUS: f32 = 0.125;
-/// Neighbours at most per FPFH histogram (Open3D's usual `max_nn`).
-pub const FPFH_MAX_NN: usize = 100;
-/// Normal estimation radius, metres (2 × the voxel), and its neighbour cap.
-pub const NORMAL_RADIUS: f32 = 0.05;
-pub const NORMAL_MAX_NN: usize = 30;
 
 /// A way of describing every point of a cloud.
 #[derive(Clone)]
 pub enum Descriptor {
-    /// FPFH at these radii (metres), concatenated; normals by PCA over [`NORMAL_RADIUS`].
+    /// FPFH at these radii (metres), concatenated ([`fpfh_features`]).
     Fpfh { radii: Vec<f32> },
-    /// A trained patch network, loaded from `path`.
+    /// A trained network, loaded from `path`.
     Learned { path: PathBuf, model: Arc<LearnedDescriptor> },
 }
 
@@ -86,24 +80,18 @@ impl Descriptor {
     /// One descriptor row per point of `points` (a cloud in its own camera frame, metres).
     pub fn describe(&self, points: &[Point]) -> Features {
         match self {
-            Descriptor::Fpfh { radii } => {
-                let normals = estimate_normals(points, NORMAL_RADIUS, NORMAL_MAX_NN);
-                Features { dim: 33 * radii.len(), data: fpfh_multi(points, &normals, radii, FPFH_MAX_NN) }
-            }
-            Descriptor::Learned { model, .. } => Features { dim: model.dim(), data: model.describe(points, points) },
+            Descriptor::Fpfh { radii } => Features { dim: FPFH_DIM * radii.len(), data: fpfh_features(points, radii) },
+            Descriptor::Learned { .. } => self.describe_at(points, &(0..points.len()).collect::<Vec<_>>()),
         }
     }
 
     /// The rows of [`Descriptor::describe`] at `keypoints` (indices into `points`), in that order. FPFH
-    /// still needs every point's histogram (each FPFH mixes its neighbours'); a patch network describes
-    /// only the keypoints.
+    /// (and the FPFH MLP) still need every point's histogram (each FPFH mixes its neighbours'); a patch
+    /// network describes only the keypoints.
     pub fn describe_at(&self, points: &[Point], keypoints: &[usize]) -> Features {
         match self {
             Descriptor::Fpfh { .. } => self.describe(points).select(keypoints),
-            Descriptor::Learned { model, .. } => {
-                let keys: Vec<Point> = keypoints.iter().map(|&k| points[k]).collect();
-                Features { dim: model.dim(), data: model.describe(points, &keys) }
-            }
+            Descriptor::Learned { model, .. } => Features { dim: model.dim(), data: model.describe(points, keypoints) },
         }
     }
 }

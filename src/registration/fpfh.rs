@@ -3,10 +3,17 @@
 //! within the radius), SPFH of each point over its neighbours, then FPFH = SPFH + the neighbours' SPFH
 //! weighted by 1/d² and normalised to 100 per angle. Several radii concatenate (multi-scale).
 
+use super::normals::estimate_normals;
 use crate::geometry::{Point, RadiusIndex};
 use nalgebra::Vector3;
 use rayon::prelude::*;
 use std::f64::consts::PI;
+
+/// Neighbours at most per FPFH histogram (Open3D's usual `max_nn`).
+pub const FPFH_MAX_NN: usize = 100;
+/// Normal estimation radius, metres (2 × the 2.5 cm evaluation voxel), and its neighbour cap.
+pub const NORMAL_RADIUS: f32 = 0.05;
+pub const NORMAL_MAX_NN: usize = 30;
 
 /// Bins per angle, and the histogram length.
 pub const BINS: usize = 11;
@@ -22,7 +29,9 @@ fn pair_features(p1: Vector3<f64>, n1: Vector3<f64>, p2: Vector3<f64>, n2: Vecto
     }
     let (a1, a2) = (n1.dot(&dp) / d, n2.dot(&dp) / d);
     let (mut u, mut w2) = (n1, n2);
-    let phi = if a1.abs().acos() > a2.abs().acos() {
+    // Open3D swaps when acos|a1| > acos|a2|; acos falls on [0, 1], and a NaN acos (|a| > 1 by rounding)
+    // never swaps: the same test without the two acos.
+    let phi = if a1.abs() < a2.abs() && a2.abs() <= 1.0 {
         u = n2;
         w2 = n1;
         dp = -dp;
@@ -90,8 +99,9 @@ pub fn fpfh(points: &[Point], normals: &[Vector3<f32>], radius: f32, max_nn: usi
             if d2 == 0.0 {
                 continue;
             }
+            let inv = 1.0 / d2;
             for (b, a) in acc.iter_mut().enumerate() {
-                let v = spfh[j as usize][b] / d2;
+                let v = spfh[j as usize][b] * inv;
                 sum[b / BINS] += v;
                 *a += v;
             }
@@ -122,6 +132,13 @@ pub fn fpfh_multi(points: &[Point], normals: &[Vector3<f32>], radii: &[f32], max
     out
 }
 
+/// The FPFH rows of a cloud (in its camera frame, metres) at `radii`, with normals by PCA over
+/// [`NORMAL_RADIUS`] oriented to the camera: what the `fpfh` descriptor and the FPFH MLP both start from.
+pub fn fpfh_features(points: &[Point], radii: &[f32]) -> Vec<f32> {
+    let normals = estimate_normals(points, NORMAL_RADIUS, NORMAL_MAX_NN);
+    fpfh_multi(points, &normals, radii, FPFH_MAX_NN)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -135,7 +152,7 @@ mod tests {
                 Point::new(a.cos() * (1.0 + 0.001 * i as f32), a.sin(), 2.0 + 0.003 * i as f32)
             })
             .collect();
-        let normals = super::super::normals::estimate_normals(&pts, 0.3, 30);
+        let normals = estimate_normals(&pts, 0.3, 30);
         let f = fpfh(&pts, &normals, 0.3, 50);
         for row in f.chunks(FPFH_DIM) {
             for a in 0..3 {

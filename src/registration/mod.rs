@@ -5,8 +5,8 @@
 //! camera), [`fpfh`] (33-bin FPFH, multi-scale), [`matching`] (nearest / mutual nearest descriptors),
 //! [`ransac`] (seeded, thread-count independent) and [`icp`] (point-to-point refinement), [`metrics`]
 //! (IR, FMR, the official RR error, RRE / RTE, information matrices), [`descriptor`] (what
-//! `--descriptor` selects: FPFH or a learned patch descriptor, made of [`lrf`] (local reference frames),
-//! [`patch`] (truncated-distance patches) and [`learned`] (the trained network and its checkpoint)),
+//! `--descriptor` selects: FPFH or a trained network, made of [`lrf`] (local reference frames), [`patch`]
+//! (truncated-distance patches) and [`learned`] (the patch network or the FPFH MLP and their checkpoint)),
 //! [`benchmark`] (gt.log / gt.info and layouts), [`evaluate`] (the protocol)
 //! and [`report`] (tables and the paired comparison).
 

@@ -77,8 +77,8 @@ fn bench_pairs(root: &Path) -> Result<Vec<TrainPair>> {
 
 /// Up to `n` corresponding points of `pair`: source points drawn without replacement, each with the
 /// target point nearest to where the stored pose puts it, kept when that one is within the radius of
-/// `target_index` (built on `pair.target`). Returns (source point, target point) pairs.
-pub fn correspondences(pair: &TrainPair, target_index: &RadiusIndex, n: usize, rng: &mut Rng) -> Vec<(Point, Point)> {
+/// `target_index` (built on `pair.target`). Returns (source index, target index) pairs.
+pub fn correspondences(pair: &TrainPair, target_index: &RadiusIndex, n: usize, rng: &mut Rng) -> Vec<(usize, usize)> {
     let mut order: Vec<usize> = (0..pair.source.len()).collect();
     let t = pair.t_target_from_source.cast::<f32>();
     let mut out = Vec::with_capacity(n);
@@ -88,9 +88,8 @@ pub fn correspondences(pair: &TrainPair, target_index: &RadiusIndex, n: usize, r
         }
         let j = i + rng.below((order.len() - i) as u64) as usize;
         order.swap(i, j);
-        let p = pair.source[order[i]];
-        if let Some((k, _)) = target_index.nearest(&(t * p)) {
-            out.push((p, pair.target[k]));
+        if let Some((k, _)) = target_index.nearest(&(t * pair.source[order[i]])) {
+            out.push((order[i], k));
         }
     }
     out
@@ -112,7 +111,8 @@ mod tests {
         let index = RadiusIndex::new(&pair.target, 0.0375);
         let c = correspondences(&pair, &index, 100, &mut rng);
         assert_eq!(c.len(), 100);
-        for (p, q) in &c {
+        for &(i, k) in &c {
+            let (p, q) = (pair.source[i], pair.target[k]);
             assert!(p.x < 0.54, "a source point outside the overlap got a partner: {p}");
             assert!(((t.cast::<f32>() * p) - q).norm() < 0.0375);
         }

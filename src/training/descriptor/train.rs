@@ -1,14 +1,13 @@
-//! The descriptor's training loop: per step, corresponding points of a few pairs, their patches in the
-//! two clouds, and a symmetric InfoNCE loss within each pair (the partner is the positive; points of the
-//! same pair farther than the negative radius from it are the negatives). Adam with its moments in the
-//! checkpoint, so `--resume` continues exactly; the per-step randomness comes from (seed, step).
+//! The descriptor's training loop: per step, corresponding points of a few pairs, the network's input
+//! at them in the two clouds (patches, or FPFH rows computed once per cloud), and a symmetric InfoNCE
+//! loss within each pair (the partner is the positive; points of the same pair farther than the negative
+//! radius from it are the negatives). Adam with its moments in the checkpoint, so `--resume` continues
+//! exactly; the per-step randomness comes from (seed, step).
 
 use super::data::{correspondences, TrainPair};
-use crate::registration::learned::{load_into, read_meta, save, DescriptorMeta, FORMAT};
-use crate::registration::patch::{patches, PatchConfig};
 use crate::error::{Error, Result};
 use crate::geometry::{Point, RadiusIndex};
-use crate::nn::patch_net::{PatchNet, PatchNetConfig};
+use crate::registration::learned::{load_into, read_meta, save, DescriptorMeta, DescriptorModel, DescriptorNet, Prepared, FORMAT};
 use crate::rng::Rng;
 use crate::training::optim::Adam;
 use serde::Serialize;
@@ -24,8 +23,7 @@ pub const LOSS_LOG: &str = "loss.jsonl";
 /// Everything a training run needs besides the data.
 #[derive(Clone, Debug, Serialize)]
 pub struct DescriptorTrainOptions {
-    pub net: PatchNetConfig,
-    pub patch: PatchConfig,
+    pub model: DescriptorModel,
     /// Optimiser steps in total (a resumed run continues up to this count).
     pub steps: u64,
     /// Pairs per step.
@@ -52,8 +50,7 @@ pub struct DescriptorTrainOptions {
 impl DescriptorTrainOptions {
     pub fn new(out: PathBuf) -> Self {
         DescriptorTrainOptions {
-            net: PatchNetConfig::default(),
-            patch: PatchConfig::default(),
+            model: DescriptorModel::default(),
             steps: 1500,
             pairs_per_step: 4,
             points_per_pair: 64,
@@ -71,10 +68,7 @@ impl DescriptorTrainOptions {
     }
 
     pub fn validate(&self) -> Result<()> {
-        self.patch.validate("descriptor.patch")?;
-        if self.net.voxels != self.patch.voxels as i64 {
-            return Err(Error::config("descriptor", format!("the network takes {}³ patches, the patches have {}³ voxels", self.net.voxels, self.patch.voxels)));
-        }
+        self.model.validate("descriptor")?;
         if self.steps == 0 || self.pairs_per_step == 0 || self.points_per_pair < 2 || self.checkpoint_every == 0 {
             return Err(Error::config("descriptor", "steps, pairs per step and checkpoint interval must be positive, points per pair at least 2"));
         }
@@ -126,7 +120,7 @@ pub struct DescriptorTrainReport {
     pub final_loss: f64,
 }
 
-/// Trains (or resumes) a patch descriptor on `pairs`, writing checkpoints and the loss log to `opts.out`.
+/// Trains (or resumes) a descriptor on `pairs`, writing checkpoints and the loss log to `opts.out`.
 pub fn train_descriptor(pairs: &[TrainPair], opts: &DescriptorTrainOptions, mut on_report: impl FnMut(&StepReport)) -> Result<DescriptorTrainReport> {
     opts.validate()?;
     if pairs.is_empty() {
@@ -135,7 +129,7 @@ pub fn train_descriptor(pairs: &[TrainPair], opts: &DescriptorTrainOptions, mut 
     std::fs::create_dir_all(&opts.out).map_err(|e| Error::io(&opts.out, e))?;
     tch::manual_seed(opts.seed as i64);
     let mut vs = nn::VarStore::new(Device::Cpu);
-    let net = PatchNet::new(&vs.root(), &opts.net)?;
+    let net = DescriptorNet::new(&vs.root(), &opts.model)?;
     let mut vars: Vec<(String, Tensor)> = vs.variables().into_iter().collect();
     vars.sort_by(|a, b| a.0.cmp(&b.0));
     let mut adam = Adam::new(&vars, opts.lr, (0.9, 0.999));
@@ -143,8 +137,8 @@ pub fn train_descriptor(pairs: &[TrainPair], opts: &DescriptorTrainOptions, mut 
     let mut start = 0;
     if opts.resume && latest.exists() {
         let meta = read_meta(&latest)?;
-        if meta.net != opts.net || meta.patch != opts.patch {
-            return Err(Error::config("--resume", format!("{} holds another network or patch ({:?}, {:?})", latest.display(), meta.net, meta.patch)));
+        if meta.model != opts.model {
+            return Err(Error::config("--resume", format!("{} holds another network ({:?})", latest.display(), meta.model)));
         }
         let rest = load_into(&latest, &mut vs)?;
         for (prefix, moments) in [("opt.m.", &mut adam.m), ("opt.v.", &mut adam.v)] {
@@ -156,27 +150,44 @@ pub fn train_descriptor(pairs: &[TrainPair], opts: &DescriptorTrainOptions, mut 
         start = meta.step;
     }
     let targets: Vec<RadiusIndex> = pairs.iter().map(|p| RadiusIndex::new(&p.target, opts.positive_radius_m)).collect();
+    // FPFH of every cloud once (33 floats per point and radius in memory); patch indexes per step.
+    let cached: Vec<[Prepared; 2]> = if net.worth_caching() {
+        let bar = crate::runtime::progress::bar(pairs.len() as u64, opts.progress, "pair");
+        bar.set_message("input features");
+        let c = pairs.iter().map(|p| { bar.inc(1); [net.prepare(&p.source), net.prepare(&p.target)] }).collect();
+        bar.finish_and_clear();
+        c
+    } else {
+        Vec::new()
+    };
     let log_path = opts.out.join(LOSS_LOG);
     let mut log = std::fs::OpenOptions::new().create(true).append(true).open(&log_path).map_err(|e| Error::io(&log_path, e))?;
     let bar = crate::runtime::progress::bar(opts.steps, opts.progress, "step");
     bar.set_position(start);
     let t0 = std::time::Instant::now();
     let (mut sum, mut hits, mut count, mut last) = (0f64, 0f64, 0u64, f64::NAN);
-    let n = opts.patch.voxels as i64;
     for step in start + 1..=opts.steps {
         let mut rng = Rng::new(opts.seed).fork(step);
         let mut step_loss = 0.0;
         let mut step_hits = 0.0;
         for _ in 0..opts.pairs_per_step {
             let k = rng.below(pairs.len() as u64) as usize;
-            let c = correspondences(&pairs[k], &targets[k], opts.points_per_pair, &mut rng);
+            let pair = &pairs[k];
+            let c = correspondences(pair, &targets[k], opts.points_per_pair, &mut rng);
             if c.len() < 2 {
                 continue;
             }
-            let (sp, tp): (Vec<Point>, Vec<Point>) = c.into_iter().unzip();
-            let m = sp.len() as i64;
-            let xs = Tensor::from_slice(&patches(&pairs[k].source, &sp, &opts.patch)).view([m, 1, n, n, n]);
-            let xt = Tensor::from_slice(&patches(&pairs[k].target, &tp, &opts.patch)).view([m, 1, n, n, n]);
+            let (si, ti): (Vec<usize>, Vec<usize>) = c.into_iter().unzip();
+            let fresh;
+            let [ps, pt] = match cached.get(k) {
+                Some(both) => both,
+                None => {
+                    fresh = [net.prepare(&pair.source), net.prepare(&pair.target)];
+                    &fresh
+                }
+            };
+            let (xs, xt) = (net.input(ps, &pair.source, &si), net.input(pt, &pair.target, &ti));
+            let tp: Vec<Point> = ti.iter().map(|&i| pair.target[i]).collect();
             let (loss, h) = info_nce(&net.forward(&xs), &net.forward(&xt), &near_mask(&tp, opts.negative_radius_m), opts.temperature);
             let loss = loss / opts.pairs_per_step as f64;
             loss.backward();
@@ -195,8 +206,7 @@ pub fn train_descriptor(pairs: &[TrainPair], opts: &DescriptorTrainOptions, mut 
             writeln!(log, "{}", serde_json::to_string(&report).expect("json")).map_err(|e| Error::io(&log_path, e))?;
             let meta = DescriptorMeta {
                 format: FORMAT.into(),
-                net: opts.net,
-                patch: opts.patch,
+                model: opts.model.clone(),
                 step,
                 info: serde_json::json!({"options": opts, "pairs": pairs.len(), "last_loss": report.loss}),
             };
