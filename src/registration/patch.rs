@@ -89,11 +89,6 @@ impl<'a> PatchCloud<'a> {
     }
 }
 
-/// The patches of `keypoints` in `cloud` (see [`PatchCloud::patches`]; builds the indexes each call).
-pub fn patches(cloud: &[Point], keypoints: &[Point], cfg: &PatchConfig) -> Vec<f32> {
-    PatchCloud::new(cloud, cfg).patches(keypoints)
-}
-
 /// One patch: `points` (those within [`PatchConfig::reach_m`] of `centre`; others are ignored) in the
 /// frame `frame` (rows = axes) centred on `centre`.
 pub fn patch(centre: &Point, frame: &Matrix3<f32>, points: &[Point], cfg: &PatchConfig) -> Vec<f32> {
@@ -163,7 +158,7 @@ mod tests {
         let pose = Isometry3::from_parts(Translation3::new(0.4, -1.2, 2.0), UnitQuaternion::from_euler_angles(0.7, -0.4, 2.1)).cast::<f32>();
         let moved: Vec<Point> = cloud.iter().map(|p| pose * p).collect();
         let moved_keys: Vec<Point> = keypoints.iter().map(|p| pose * p).collect();
-        let (a, b) = (patches(&cloud, &keypoints, &cfg), patches(&moved, &moved_keys, &cfg));
+        let (a, b) = (PatchCloud::new(&cloud, &cfg).patches(&keypoints), PatchCloud::new(&moved, &cfg).patches(&moved_keys));
         assert!(a.iter().filter(|v| **v > 0.5).count() > 200, "the patches see the surfaces");
         let worst = a.iter().zip(&b).map(|(x, y)| (x - y).abs()).fold(0.0, f32::max);
         assert!(worst < 2e-3, "largest difference {worst}");

@@ -154,7 +154,8 @@ pub fn train_descriptor(pairs: &[TrainPair], opts: &DescriptorTrainOptions, mut 
     let cached: Vec<[Prepared; 2]> = if net.worth_caching() {
         let bar = crate::runtime::progress::bar(pairs.len() as u64, opts.progress, "pair");
         bar.set_message("input features");
-        let c = pairs.iter().map(|p| { bar.inc(1); [net.prepare(&p.source), net.prepare(&p.target)] }).collect();
+        let c = pairs.iter().map(|p| [net.prepare(&p.source), net.prepare(&p.target)]);
+        let c = c.inspect(|_| bar.inc(1)).collect();
         bar.finish_and_clear();
         c
     } else {
