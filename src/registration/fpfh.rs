@@ -56,8 +56,8 @@ fn bin(x: f64) -> usize {
 /// FPFH of every point at one radius, rows of [`FPFH_DIM`] values (f32; computed in f64).
 pub fn fpfh(points: &[Point], normals: &[Vector3<f32>], radius: f32, max_nn: usize) -> Vec<f32> {
     assert_eq!(points.len(), normals.len(), "one normal per point");
-    let p64 = |i: usize| points[i].coords.cast::<f64>();
-    let n64 = |i: usize| normals[i].cast::<f64>();
+    let p64: Vec<Vector3<f64>> = points.iter().map(|p| p.coords.cast::<f64>()).collect();
+    let n64: Vec<Vector3<f64>> = normals.iter().map(|n| n.cast::<f64>()).collect();
     // Neighbourhoods once: each point's list (sorted by distance, the point itself first).
     let grid = RadiusIndex::new(points, radius);
     let neighbours: Vec<Vec<(u32, f32)>> = points
@@ -76,7 +76,7 @@ pub fn fpfh(points: &[Point], normals: &[Vector3<f32>], radius: f32, max_nn: usi
             if nb.len() > 1 {
                 let incr = 100.0 / (nb.len() - 1) as f64;
                 for &(j, _) in &nb[1..] {
-                    let f = pair_features(p64(i), n64(i), p64(j as usize), n64(j as usize));
+                    let f = pair_features(p64[i], n64[i], p64[j as usize], n64[j as usize]);
                     h[bin(BINS as f64 * (f[0] + PI) / (2.0 * PI))] += incr;
                     h[BINS + bin(BINS as f64 * (f[1] + 1.0) * 0.5)] += incr;
                     h[2 * BINS + bin(BINS as f64 * (f[2] + 1.0) * 0.5)] += incr;
@@ -92,23 +92,23 @@ pub fn fpfh(points: &[Point], normals: &[Vector3<f32>], radius: f32, max_nn: usi
             return;
         }
         let mut acc = [0.0f64; FPFH_DIM];
-        let mut sum = [0.0f64; 3];
         for &(j, _) in &nb[1..] {
             // Open3D weights by the squared distance it reports (recomputed here in f64).
-            let d2 = (p64(j as usize) - p64(i)).norm_squared();
+            let d2 = (p64[j as usize] - p64[i]).norm_squared();
             if d2 == 0.0 {
                 continue;
             }
             let inv = 1.0 / d2;
-            for (b, a) in acc.iter_mut().enumerate() {
-                let v = spfh[j as usize][b] * inv;
-                sum[b / BINS] += v;
-                *a += v;
+            for (a, s) in acc.iter_mut().zip(&spfh[j as usize]) {
+                *a += s * inv;
             }
         }
-        for s in &mut sum {
-            if *s != 0.0 {
-                *s = 100.0 / *s;
+        // Each angle's weighted part is normalised to 100.
+        let mut sum = [0.0f64; 3];
+        for (a, s) in sum.iter_mut().enumerate() {
+            let total: f64 = acc[a * BINS..(a + 1) * BINS].iter().sum();
+            if total != 0.0 {
+                *s = 100.0 / total;
             }
         }
         for b in 0..FPFH_DIM {
