@@ -27,6 +27,14 @@ fn boost(bench: &Path, seq: &Path, out: &Path) -> String {
     ])
 }
 
+/// A unit's scores files (one per benchmark scoring).
+fn scores_files(unit: &Path) -> Vec<PathBuf> {
+    let mut v: Vec<PathBuf> = std::fs::read_dir(unit).unwrap().map(|e| e.unwrap().path())
+        .filter(|p| p.file_name().unwrap().to_str().unwrap().starts_with("scores-")).collect();
+    v.sort();
+    v
+}
+
 fn read_tsv(path: &Path) -> Vec<(String, f64)> {
     std::fs::read_to_string(path).unwrap().lines().skip(1).map(|l| {
         let (k, v) = l.split_once('\t').unwrap();
@@ -47,7 +55,7 @@ fn a_tiny_run_writes_the_table_deterministically_and_resumes_without_redoing_uni
 
     let (a, b) = (dir.path().join("a"), dir.path().join("b"));
     let first = boost(&bench, &seq, &a);
-    assert!(first.contains("5 units run, 0 already done"), "{first}");
+    assert!(first.contains("5 units scored (4 of them trained first), 0 already done"), "{first}");
     let table = std::fs::read_to_string(a.join("boost.txt")).unwrap();
     for want in ["C0 raw FPFH", "C1 real pairs", "C3 classical generator", "C1 - C0", "C3 - C0", "200 samples", "50 samples"] {
         assert!(table.contains(want), "{want} missing from\n{table}");
@@ -58,12 +66,38 @@ fn a_tiny_run_writes_the_table_deterministically_and_resumes_without_redoing_uni
     assert!(c3_rows.iter().all(|l| l.split(',').nth(3) == Some("2")), "two seeds: {csv}");
 
     // Resume: nothing is redone (the scores files are not rewritten) and the table is the same.
-    let scores: Vec<PathBuf> = ["C0/scores.tsv", "C1/seed-0/scores.tsv", "C1/seed-1/scores.tsv", "C3/seed-0/scores.tsv", "C3/seed-1/scores.tsv"].iter().map(|p| a.join(p)).collect();
-    let mtimes: Vec<_> = scores.iter().map(|p| std::fs::metadata(p).unwrap().modified().unwrap()).collect();
+    let units = ["C0", "C1/seed-0", "C1/seed-1", "C3/seed-0", "C3/seed-1"];
+    let scores: Vec<PathBuf> = units.iter().map(|u| scores_files(&a.join(u))).inspect(|f| assert_eq!(f.len(), 1, "{f:?}")).map(|mut f| f.remove(0)).collect();
+    let mtime = |p: &Path| std::fs::metadata(p).unwrap().modified().unwrap();
+    let mtimes: Vec<_> = scores.iter().map(|p| mtime(p)).collect();
     let again = boost(&bench, &seq, &a);
-    assert!(again.contains("0 units run, 5 already done"), "{again}");
-    assert_eq!(mtimes, scores.iter().map(|p| std::fs::metadata(p).unwrap().modified().unwrap()).collect::<Vec<_>>());
+    assert!(again.contains("0 units scored (0 of them trained first), 5 already done"), "{again}");
+    assert_eq!(mtimes, scores.iter().map(|p| mtime(p)).collect::<Vec<_>>());
     assert_eq!(std::fs::read_to_string(a.join("boost.txt")).unwrap(), table);
+
+    // Another benchmark with the same --out: every unit is scored on it, none retrained (the checkpoints
+    // keep their modification times), the first scores stay, and the table counts the new pairs.
+    let bench2 = dir.path().join("bench2");
+    run_ok(&["fragments", other.join("synthetic-200").to_str().unwrap(), "--single-frames", "--gaps", "10,15", "--every", "3", "--out", bench2.to_str().unwrap(), "--quiet"]);
+    let checkpoints: Vec<PathBuf> = units[1..].iter().map(|u| a.join(u).join("latest.safetensors")).collect();
+    let ck_mtimes: Vec<_> = checkpoints.iter().map(|p| mtime(p)).collect();
+    let third = boost(&bench2, &seq, &a);
+    assert!(third.contains("5 units scored (0 of them trained first), 0 already done"), "{third}");
+    assert_eq!(ck_mtimes, checkpoints.iter().map(|p| mtime(p)).collect::<Vec<_>>());
+    assert!(units.iter().all(|u| scores_files(&a.join(u)).len() == 2));
+    let pairs_in = |bench: &Path| -> usize {
+        let log = std::fs::read_to_string(bench.join("metadata/benchmarks/single-frame/synthetic-200-frames/gt.log")).unwrap();
+        log.lines().count() / 5
+    };
+    let (n1, n2) = (pairs_in(&bench), pairs_in(&bench2));
+    assert_ne!(n1, n2, "the two benchmarks must differ for this check");
+    // boost.csv: benchmark,samples,condition,seeds,pairs,...
+    let c1_pairs = |csv: &str| -> usize {
+        let row = csv.lines().map(|l| l.split(',').collect::<Vec<_>>()).find(|f| f[0] == "single-frame" && f[2] == "C1").unwrap();
+        row[4].parse().unwrap()
+    };
+    assert_eq!(c1_pairs(&csv), n1, "{csv}");
+    assert_eq!(c1_pairs(&std::fs::read_to_string(a.join("boost.csv")).unwrap()), n2);
 
     // Determinism: a second run from scratch gives the same table.
     boost(&bench, &seq, &b);

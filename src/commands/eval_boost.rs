@@ -22,7 +22,9 @@ C1 + C4 at C1's pair count (half each); C5x2 / C6x2 at double (all of C1 + as ma
 in-process from the training frames with the build pipeline into <out>/data/<generator>/ (--pairs of them, drawn from \
 ceil(1.25 * pairs / frames) views per frame). Each condition x seed trains the descriptor (--model, --steps) into \
 <out>/<condition>/seed-<k>/ and is scored on every pair of the benchmark folder with the same sampling and RANSAC seeds \
-(--eval-seed). A unit is skipped when its scores.tsv exists: rerun the same command to resume. Writes <out>/boost.txt (the \
+(--eval-seed). A unit is skipped when its scores on this benchmark folder and these evaluation settings exist \
+(scores-<key>.tsv): rerun the same command to resume; a run on another benchmark (or --only, --samples, --eval-seed) \
+with the same --out scores the trained units again without retraining them. Writes <out>/boost.txt (the \
 table: FMR / IR / RR mean [min-max] over seeds per condition, benchmark and sample count, and the paired IR differences C1-C0, \
 C3-C0, C3-C2, C4-C3, C5-C1, C5x2-C1, C6-C1, C6x2-C1 with 95 % CIs over pairs x seeds), boost.csv and boost-paired.csv."
 )]
@@ -127,7 +129,14 @@ pub fn run(a: &EvalBoostArgs, out: &mut dyn Write) -> Result<()> {
     for n in &report.notes {
         writeln!(out, "{n}").map_err(w)?;
     }
-    writeln!(out, "{} units run, {} already done; tables in {}", report.units_run, report.units_skipped, a.out.join("boost.txt").display()).map_err(w)?;
+    writeln!(
+        out,
+        "{} units scored ({} of them trained first), {} already done; tables in {}",
+        report.units_run,
+        report.units_trained,
+        report.units_skipped,
+        a.out.join("boost.txt").display()
+    ).map_err(w)?;
     write!(out, "{}", report.text).map_err(w)?;
     Ok(())
 }

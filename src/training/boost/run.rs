@@ -1,8 +1,9 @@
 //! The boost protocol as one resumable run: the training pairs of every condition, one descriptor per
 //! condition and training seed in `<out>/<condition>/seed-<k>/`, each scored on the same benchmark with
-//! the same sampling and RANSAC seeds, and the table. A unit (condition × seed) is done when its
-//! `scores.tsv` exists (written atomically, after training finished), so a rerun skips it; an
-//! interrupted training resumes from its last checkpoint.
+//! the same sampling and RANSAC seeds, and the table. A unit (condition × seed) is done when its scores
+//! on this scoring ([`scores_file`]: benchmark folder, selection, evaluation settings) exist (written
+//! atomically, after training finished), so a rerun skips it; a unit trained for another scoring is only
+//! scored; an interrupted training resumes from its last checkpoint.
 
 use super::conditions::{Condition, Generator};
 use super::data::{generated_pairs, generator_config, open_one, real_pairs, OverlapPair};
@@ -55,6 +56,9 @@ pub struct BoostReport {
     pub text: String,
     /// Facts about the data (pair counts, histogram matching).
     pub notes: Vec<String>,
+    /// Units trained in this run (before being scored; the other trained units were trained before).
+    pub units_trained: usize,
+    /// Units scored in this run, and units whose scores on this scoring existed.
     pub units_run: usize,
     pub units_skipped: usize,
 }
@@ -68,7 +72,25 @@ pub fn unit_dir(out: &Path, c: Condition, seed: u64) -> PathBuf {
     }
 }
 
-pub const SCORES: &str = "scores.tsv";
+/// A unit's scores on one scoring: `scores-<key>.tsv`, the key a hash of the benchmark folder (its
+/// canonical path), the benchmarks selected of it and the evaluation settings, so a run on another
+/// benchmark or with other sample counts scores the trained units again instead of reusing these.
+pub fn scores_file(cfg: &BoostConfig) -> Result<String> {
+    let bench = std::fs::canonicalize(&cfg.bench).map_err(|e| Error::io(&cfg.bench, e))?;
+    let mut only = cfg.only.clone();
+    only.sort();
+    let key = format!("{}\n{only:?}\n{:?}", bench.display(), cfg.eval);
+    Ok(format!("scores-{}.tsv", &blake3::hash(key.as_bytes()).to_hex()[..16]))
+}
+
+/// Whether a unit finished training: its scores are written only after training, so any scores file
+/// (of any scoring) says it did.
+fn trained(dir: &Path) -> bool {
+    std::fs::read_dir(dir).map_or(false, |entries| {
+        entries.flatten().any(|e| e.file_name().to_str().is_some_and(|n| n.starts_with("scores") && n.ends_with(".tsv")))
+    })
+}
+
 /// The keys and overlaps of a unit's training pairs.
 pub const TRAINING_PAIRS: &str = "training-pairs.tsv";
 
@@ -162,10 +184,13 @@ pub fn run_boost(cfg: &BoostConfig, log: &mut dyn FnMut(&str)) -> Result<BoostRe
     // Seed-major: every condition's seed 0 first, so an interrupted run has compared all conditions once.
     let units: Vec<(Condition, u64)> =
         (0..cfg.seeds).flat_map(|k| cfg.conditions.iter().filter(move |c| c.trains() || k == 0).map(move |&c| (c, k))).collect();
-    let todo: Vec<(Condition, u64)> = units.iter().copied().filter(|&(c, k)| !unit_dir(&cfg.out, c, k).join(SCORES).exists()).collect();
+    let scores_name = scores_file(cfg)?;
+    let todo: Vec<(Condition, u64)> = units.iter().copied().filter(|&(c, k)| !unit_dir(&cfg.out, c, k).join(&scores_name).exists()).collect();
+    // Units trained before (scored on another benchmark) are only scored: no data to build for them.
+    let to_train: Vec<(Condition, u64)> = todo.iter().copied().filter(|&(c, k)| c.trains() && !trained(&unit_dir(&cfg.out, c, k))).collect();
     let mut notes = Vec::new();
-    let data = if todo.iter().any(|(c, _)| c.trains()) {
-        let conds: Vec<Condition> = todo.iter().map(|u| u.0).collect();
+    let data = if !to_train.is_empty() {
+        let conds: Vec<Condition> = to_train.iter().map(|u| u.0).collect();
         Some(prepare_data(cfg, &conds, &mut notes, log)?)
     } else {
         None
@@ -174,7 +199,7 @@ pub fn run_boost(cfg: &BoostConfig, log: &mut dyn FnMut(&str)) -> Result<BoostRe
     bar.inc((units.len() - todo.len()) as u64);
     for &(c, k) in &todo {
         let dir = unit_dir(&cfg.out, c, k);
-        let descriptor = if c.trains() {
+        let descriptor = if c.trains() && to_train.contains(&(c, k)) {
             let pairs = condition_pairs(c, data.as_ref().expect("prepared"), cfg.classical.seed);
             bar.set_message(format!("{} seed {k}: training on {} pairs", c.name(), pairs.len()));
             log(&format!("{} seed {k}: training on {} pairs", c.name(), pairs.len()));
@@ -186,12 +211,15 @@ pub fn run_boost(cfg: &BoostConfig, log: &mut dyn FnMut(&str)) -> Result<BoostRe
             train_descriptor(&pairs, &opts, |_| {})?;
             let path = dir.join(LATEST);
             Descriptor::Learned { model: Arc::new(crate::registration::learned::LearnedDescriptor::load(&path)?), path }
+        } else if c.trains() {
+            let path = dir.join(LATEST);
+            Descriptor::Learned { model: Arc::new(crate::registration::learned::LearnedDescriptor::load(&path)?), path }
         } else {
             Descriptor::Fpfh { radii: vec![crate::registration::descriptor::DEFAULT_FPFH_RADIUS] }
         };
         bar.set_message(format!("{} seed {k}: evaluating", c.name()));
         let scores = score_all(&benches, &descriptor, &cfg.eval)?;
-        scores_file::write(&dir.join(SCORES), &scores)?;
+        scores_file::write(&dir.join(&scores_name), &scores)?;
         bar.inc(1);
     }
     bar.finish_and_clear();
@@ -199,7 +227,7 @@ pub fn run_boost(cfg: &BoostConfig, log: &mut dyn FnMut(&str)) -> Result<BoostRe
     let mut by_condition = units.clone();
     by_condition.sort();
     for &(c, k) in &by_condition {
-        results.entry(c).or_default().push(scores_file::read(&unit_dir(&cfg.out, c, k).join(SCORES))?);
+        results.entry(c).or_default().push(scores_file::read(&unit_dir(&cfg.out, c, k).join(&scores_name))?);
     }
     let (table, paired) = summarize(&results);
     let text = format_text(&table, &paired);
@@ -212,5 +240,5 @@ pub fn run_boost(cfg: &BoostConfig, log: &mut dyn FnMut(&str)) -> Result<BoostRe
         old.push_str(&notes.iter().map(|n| format!("{n}\n")).collect::<String>());
         write_atomic(&cfg.out, &path, old.as_bytes(), Publish::Replace)?;
     }
-    Ok(BoostReport { text, notes, units_run: todo.len(), units_skipped: units.len() - todo.len() })
+    Ok(BoostReport { text, notes, units_trained: to_train.len(), units_run: todo.len(), units_skipped: units.len() - todo.len() })
 }
