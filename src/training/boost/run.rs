@@ -86,7 +86,7 @@ pub fn scores_file(cfg: &BoostConfig) -> Result<String> {
 /// Whether a unit finished training: its scores are written only after training, so any scores file
 /// (of any scoring) says it did.
 fn trained(dir: &Path) -> bool {
-    std::fs::read_dir(dir).map_or(false, |entries| {
+    std::fs::read_dir(dir).is_ok_and(|entries| {
         entries.flatten().any(|e| e.file_name().to_str().is_some_and(|n| n.starts_with("scores") && n.ends_with(".tsv")))
     })
 }
@@ -199,19 +199,18 @@ pub fn run_boost(cfg: &BoostConfig, log: &mut dyn FnMut(&str)) -> Result<BoostRe
     bar.inc((units.len() - todo.len()) as u64);
     for &(c, k) in &todo {
         let dir = unit_dir(&cfg.out, c, k);
-        let descriptor = if c.trains() && to_train.contains(&(c, k)) {
-            let pairs = condition_pairs(c, data.as_ref().expect("prepared"), cfg.classical.seed);
-            bar.set_message(format!("{} seed {k}: training on {} pairs", c.name(), pairs.len()));
-            log(&format!("{} seed {k}: training on {} pairs", c.name(), pairs.len()));
-            std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
-            let listing: String = pairs.iter().map(|p| format!("{}\t{}\n", p.pair.key, p.overlap)).collect();
-            write_atomic(&dir, &dir.join(TRAINING_PAIRS), format!("key\toverlap\n{listing}").as_bytes(), Publish::Replace)?;
-            let pairs: Vec<TrainPair> = pairs.into_iter().map(|p| p.pair).collect();
-            let opts = DescriptorTrainOptions { seed: k, out: dir.clone(), resume: true, progress: false, ..cfg.train.clone() };
-            train_descriptor(&pairs, &opts, |_| {})?;
-            let path = dir.join(LATEST);
-            Descriptor::Learned { model: Arc::new(crate::registration::learned::LearnedDescriptor::load(&path)?), path }
-        } else if c.trains() {
+        let descriptor = if c.trains() {
+            if to_train.contains(&(c, k)) {
+                let pairs = condition_pairs(c, data.as_ref().expect("prepared"), cfg.classical.seed);
+                bar.set_message(format!("{} seed {k}: training on {} pairs", c.name(), pairs.len()));
+                log(&format!("{} seed {k}: training on {} pairs", c.name(), pairs.len()));
+                std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
+                let listing: String = pairs.iter().map(|p| format!("{}\t{}\n", p.pair.key, p.overlap)).collect();
+                write_atomic(&dir, &dir.join(TRAINING_PAIRS), format!("key\toverlap\n{listing}").as_bytes(), Publish::Replace)?;
+                let pairs: Vec<TrainPair> = pairs.into_iter().map(|p| p.pair).collect();
+                let opts = DescriptorTrainOptions { seed: k, out: dir.clone(), resume: true, progress: false, ..cfg.train.clone() };
+                train_descriptor(&pairs, &opts, |_| {})?;
+            }
             let path = dir.join(LATEST);
             Descriptor::Learned { model: Arc::new(crate::registration::learned::LearnedDescriptor::load(&path)?), path }
         } else {
