@@ -16,15 +16,21 @@ fn run_ok(args: &[&str]) -> String {
 }
 
 fn boost(bench: &Path, seq: &Path, out: &Path) -> String {
+    boost_with(bench, seq, out, &[])
+}
+
+fn boost_with(bench: &Path, seq: &Path, out: &Path, extra: &[&str]) -> String {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let classical = root.join("pipelines/paper-3dmatch-classical.toml");
     let models = root.join("models");
-    run_ok(&[
+    let mut args = vec![
         "eval", "boost", bench.to_str().unwrap(), "--sequence", seq.to_str().unwrap(), "--first", "0", "--frames", "30",
         "--conditions", "C0,C1,C3", "--seeds", "2", "--pairs", "24", "--steps", "3", "--samples", "200,50",
         "--real-every", "1", "--real-gaps", "2,4,6,8,10,12,14,16,18,20", "--classical-config", classical.to_str().unwrap(),
         "--models", models.to_str().unwrap(), "--out", out.to_str().unwrap(), "--quiet",
-    ])
+    ];
+    args.extend_from_slice(extra);
+    run_ok(&args)
 }
 
 /// A unit's scores files (one per benchmark scoring).
@@ -99,6 +105,13 @@ fn a_tiny_run_writes_the_table_deterministically_and_resumes_without_redoing_uni
     assert_eq!(c1_pairs(&csv), n1, "{csv}");
     assert_eq!(c1_pairs(&std::fs::read_to_string(a.join("boost.csv")).unwrap()), n2);
 
+    // --redraw with the same --out: seed 0 keeps the protocol's draw (its units are reused), seed 1 of
+    // each trained condition draws its own training pairs into seed-1-redrawn/.
+    let redrawn = boost_with(&bench, &seq, &a, &["--redraw"]);
+    assert!(redrawn.contains("2 units scored (2 of them trained first), 3 already done"), "{redrawn}");
+    let listing = |unit: &str| std::fs::read_to_string(a.join(unit).join("training-pairs.tsv")).unwrap();
+    assert_ne!(listing("C1/seed-1-redrawn"), listing("C1/seed-1"), "a redraw draws other real pairs");
+
     // Determinism: a second run from scratch gives the same table.
     boost(&bench, &seq, &b);
     assert_eq!(std::fs::read_to_string(b.join("boost.txt")).unwrap(), table);
@@ -107,9 +120,7 @@ fn a_tiny_run_writes_the_table_deterministically_and_resumes_without_redoing_uni
     // every 10 % bin of C1 within one pair of C3's share scaled to C1's count.
     let rows = Dataset::open(a.join("data/classical")).unwrap().read_pairs().unwrap();
     let overlap: HashMap<String, f64> = rows.iter().map(|r| (r.pair_key.clone(), r.overlap_source.max(r.overlap_target))).collect();
-    let c3: Vec<f64> = read_tsv(&a.join("C3/seed-0/training-pairs.tsv")).iter().map(|(k, _)| overlap[k]).collect();
-    let c1: Vec<f64> = read_tsv(&a.join("C1/seed-0/training-pairs.tsv")).into_iter().map(|(_, o)| o).collect();
-    assert!(c3.len() >= 10 && c1.len() >= 5, "{} generated, {} real pairs", c3.len(), c1.len());
+    // Checked for the protocol's draw and for a redraw.
     let bins = |v: &[f64]| -> Vec<usize> {
         let mut h = vec![0usize; 9];
         for &x in v {
@@ -118,9 +129,14 @@ fn a_tiny_run_writes_the_table_deterministically_and_resumes_without_redoing_uni
         }
         h
     };
-    let (h3, h1) = (bins(&c3), bins(&c1));
-    for b in 0..9 {
-        let share = c1.len() as f64 * h3[b] as f64 / c3.len() as f64;
-        assert!((h1[b] as f64 - share).abs() < 1.0, "bin {b}: {} real pairs, {share:.2} wanted ({h1:?} vs {h3:?})", h1[b]);
+    for seed in ["seed-0", "seed-1-redrawn"] {
+        let c3: Vec<f64> = read_tsv(&a.join("C3").join(seed).join("training-pairs.tsv")).iter().map(|(k, _)| overlap[k]).collect();
+        let c1: Vec<f64> = read_tsv(&a.join("C1").join(seed).join("training-pairs.tsv")).into_iter().map(|(_, o)| o).collect();
+        assert!(c3.len() >= 10 && c1.len() >= 5, "{seed}: {} generated, {} real pairs", c3.len(), c1.len());
+        let (h3, h1) = (bins(&c3), bins(&c1));
+        for b in 0..9 {
+            let share = c1.len() as f64 * h3[b] as f64 / c3.len() as f64;
+            assert!((h1[b] as f64 - share).abs() < 1.0, "{seed}, bin {b}: {} real pairs, {share:.2} wanted ({h1:?} vs {h3:?})", h1[b]);
+        }
     }
 }

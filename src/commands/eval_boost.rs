@@ -46,6 +46,11 @@ pub struct EvalBoostArgs {
     /// Training seeds per condition.
     #[arg(long, default_value_t = 3)]
     pub seeds: u64,
+    /// Each training seed k > 0 also draws its own training pairs (real and generated, from the same pools;
+    /// units in `seed-<k>-redrawn/`), so the spread and the paired intervals cover the draw of the training
+    /// set, not only the network's seed. Seed 0 keeps the protocol's draw.
+    #[arg(long)]
+    pub redraw: bool,
     /// Training pairs per condition (2000 for the full protocol, 500 for a quick one).
     #[arg(long, default_value_t = 2000)]
     pub pairs: usize,
@@ -111,6 +116,7 @@ pub fn run(a: &EvalBoostArgs, out: &mut dyn Write) -> Result<()> {
         only: a.only.clone(),
         conditions: parse_list(&a.conditions)?,
         seeds: a.seeds,
+        redraw: a.redraw,
         pairs: a.pairs,
         train,
         eval: EvalConfig { samples: a.samples.clone(), seed: a.eval_seed, ..Default::default() },

@@ -37,6 +37,9 @@ pub struct BoostConfig {
     pub only: Vec<String>,
     pub conditions: Vec<Condition>,
     pub seeds: u64,
+    /// Each training seed k > 0 also draws its own training pairs (real and generated, from the same
+    /// pools); seed 0 keeps the protocol's draw. The spread over seeds then covers the draw too.
+    pub redraw: bool,
     /// Training pairs per condition (C5/C6: C1's count; the 2x variants double it).
     pub pairs: usize,
     /// The descriptor training settings (`out`, `seed`, `resume` are set per unit).
@@ -63,12 +66,31 @@ pub struct BoostReport {
     pub units_skipped: usize,
 }
 
-/// `<out>/<condition>/seed-<k>` (C0, untrained: `<out>/C0`).
-pub fn unit_dir(out: &Path, c: Condition, seed: u64) -> PathBuf {
-    if c.trains() {
-        out.join(c.name()).join(format!("seed-{seed}"))
+/// `<out>/<condition>/seed-<k>`, or `seed-<k>-redrawn` when seed k > 0 drew its own pairs (C0, untrained:
+/// `<out>/C0`).
+pub fn unit_dir(out: &Path, c: Condition, seed: u64, redraw: bool) -> PathBuf {
+    match (c.trains(), draw_index(seed, redraw)) {
+        (false, _) => out.join(c.name()),
+        (true, 0) => out.join(c.name()).join(format!("seed-{seed}")),
+        (true, _) => out.join(c.name()).join(format!("seed-{seed}-redrawn")),
+    }
+}
+
+/// Which draw of the training pairs seed `k` trains on: 0 (the protocol's) unless `redraw`.
+fn draw_index(seed: u64, redraw: bool) -> u64 {
+    if redraw {
+        seed
     } else {
-        out.join(c.name())
+        0
+    }
+}
+
+/// The random stream of draw `d` from a base stream: the base itself for draw 0.
+fn for_draw(base: Rng, d: u64) -> Rng {
+    if d == 0 {
+        base
+    } else {
+        base.fork(1_000 + d)
     }
 }
 
@@ -101,14 +123,22 @@ fn subset(pairs: &[OverlapPair], k: usize, rng: &mut Rng) -> Vec<OverlapPair> {
     idx.into_iter().map(|i| pairs[i].clone()).collect()
 }
 
-/// The training pairs: the real ones (matched to the classical generator's overlap histogram) and each
-/// generator's, at most `cfg.pairs` of each.
+/// The pools the training pairs are drawn from: every real candidate pair and every pair each generator
+/// built (with the seed of its draw).
+struct Pools {
+    /// `None` when no condition to train uses real pairs.
+    real: Option<Vec<OverlapPair>>,
+    generated: BTreeMap<Generator, (Vec<OverlapPair>, u64)>,
+}
+
+/// One draw of the training pairs: the real ones (matched to the drawn classical pairs' overlap
+/// histogram) and each generator's, at most `cfg.pairs` of each.
 struct TrainingData {
     real: Vec<OverlapPair>,
     generated: BTreeMap<Generator, Vec<OverlapPair>>,
 }
 
-fn prepare_data(cfg: &BoostConfig, todo: &[Condition], notes: &mut Vec<String>, log: &mut dyn FnMut(&str)) -> Result<TrainingData> {
+fn build_pools(cfg: &BoostConfig, todo: &[Condition], log: &mut dyn FnMut(&str)) -> Result<Pools> {
     let mut gens: Vec<Generator> = todo.iter().filter_map(|c| c.generator()).collect();
     if todo.iter().any(|c| c.uses_real()) {
         gens.push(Generator::Classical); // the reference histogram of C1
@@ -116,31 +146,42 @@ fn prepare_data(cfg: &BoostConfig, todo: &[Condition], notes: &mut Vec<String>, 
     gens.sort();
     gens.dedup();
     let samples_per_frame = ((cfg.pairs as f64 * 1.25 / cfg.frames.max(1) as f64).ceil() as u32).max(1);
-    let mut all: BTreeMap<Generator, Vec<OverlapPair>> = BTreeMap::new();
+    let mut generated = BTreeMap::new();
     for g in gens {
         log(&format!("building the {} generator's pairs ({} per frame of {} frames)", g.name(), samples_per_frame, cfg.frames));
         let config = generator_config(&cfg.classical, g, &cfg.models, &cfg.sequence, cfg.first, cfg.frames, samples_per_frame)?;
         let pairs = generated_pairs(&config, &cfg.out.join("data").join(g.name()), cfg.progress)?;
-        let mut idx = sample_indices(pairs.len(), cfg.pairs, &mut Rng::new(config.seed).fork(g as u64));
-        idx.sort_unstable();
-        let mut keep = vec![false; pairs.len()];
-        idx.iter().for_each(|&i| keep[i] = true);
-        let chosen: Vec<OverlapPair> = pairs.into_iter().zip(keep).filter(|(_, k)| *k).map(|(p, _)| p).collect();
-        notes.push(format!("{}: {} generated pairs{}", g.name(), chosen.len(), if chosen.len() < cfg.pairs { " (all the build made: fewer than --pairs)" } else { "" }));
-        all.insert(g, chosen);
+        generated.insert(g, (pairs, config.seed));
     }
-    let mut real = Vec::new();
+    let mut real = None;
     if todo.iter().any(|c| c.uses_real()) {
         let seq = open_one(&cfg.sequence)?;
         log(&format!("making the real pairs of frames {}..{}", cfg.first, cfg.first + cfg.frames));
         let bar = crate::runtime::progress::bar(cfg.frames as u64, cfg.progress, "frames");
-        let candidates = real_pairs(&seq, cfg.first, cfg.frames, cfg.real_every, &cfg.real_gaps, &mut || bar.inc(1))?;
+        real = Some(real_pairs(&seq, cfg.first, cfg.frames, cfg.real_every, &cfg.real_gaps, &mut || bar.inc(1))?);
         bar.finish_and_clear();
-        let reference: Vec<f64> = all[&Generator::Classical].iter().map(|p| p.overlap).collect();
+    }
+    Ok(Pools { real, generated })
+}
+
+/// Draw `d` of the training pairs from the pools (draw 0: the protocol's), with its facts in `notes`.
+fn draw(cfg: &BoostConfig, pools: &Pools, d: u64, notes: &mut Vec<String>) -> TrainingData {
+    let tag = if d == 0 { String::new() } else { format!(" (draw {d})") };
+    let mut generated = BTreeMap::new();
+    for (&g, (pairs, seed)) in &pools.generated {
+        let mut idx = sample_indices(pairs.len(), cfg.pairs, &mut for_draw(Rng::new(*seed).fork(g as u64), d));
+        idx.sort_unstable();
+        let chosen: Vec<OverlapPair> = idx.into_iter().map(|i| pairs[i].clone()).collect();
+        notes.push(format!("{}{tag}: {} generated pairs{}", g.name(), chosen.len(), if chosen.len() < cfg.pairs { " (all the build made: fewer than --pairs)" } else { "" }));
+        generated.insert(g, chosen);
+    }
+    let mut real = Vec::new();
+    if let Some(candidates) = &pools.real {
+        let reference: Vec<f64> = generated[&Generator::Classical].iter().map(|p| p.overlap).collect();
         let overlaps: Vec<f64> = candidates.iter().map(|p| p.overlap).collect();
-        let m = match_histogram(&overlaps, &reference, &EDGES, cfg.pairs, &mut Rng::new(cfg.classical.seed).fork(77));
+        let m = match_histogram(&overlaps, &reference, &EDGES, cfg.pairs, &mut for_draw(Rng::new(cfg.classical.seed).fork(77), d));
         notes.push(format!(
-            "real: {} candidate pairs (overlap histogram {:?} over bins from 10 % by 10 %); the classical pairs' histogram {:?}; \
+            "real{tag}: {} candidate pairs (overlap histogram {:?} over bins from 10 % by 10 %); the classical pairs' histogram {:?}; \
              {} real pairs drawn to it{}",
             candidates.len(),
             histogram(&overlaps, &EDGES),
@@ -150,15 +191,15 @@ fn prepare_data(cfg: &BoostConfig, todo: &[Condition], notes: &mut Vec<String>, 
         ));
         real = m.indices.iter().map(|&i| candidates[i].clone()).collect();
     }
-    Ok(TrainingData { real, generated: all })
+    TrainingData { real, generated }
 }
 
 /// The pairs condition `c` trains on.
-fn condition_pairs(c: Condition, data: &TrainingData, seed: u64) -> Vec<OverlapPair> {
+fn condition_pairs(c: Condition, data: &TrainingData, seed: u64, d: u64) -> Vec<OverlapPair> {
     let empty = Vec::new();
     let generated = c.generator().and_then(|g| data.generated.get(&g)).unwrap_or(&empty);
     let (r, g) = c.mix(data.real.len(), generated.len());
-    let rng = Rng::new(seed).fork(c as u64);
+    let rng = for_draw(Rng::new(seed).fork(c as u64), d);
     let mut out = subset(&data.real, r, &mut rng.fork(0));
     out.extend(subset(generated, g, &mut rng.fork(1)));
     out
@@ -185,23 +226,29 @@ pub fn run_boost(cfg: &BoostConfig, log: &mut dyn FnMut(&str)) -> Result<BoostRe
     let units: Vec<(Condition, u64)> =
         (0..cfg.seeds).flat_map(|k| cfg.conditions.iter().filter(move |c| c.trains() || k == 0).map(move |&c| (c, k))).collect();
     let scores_name = scores_file(cfg)?;
-    let todo: Vec<(Condition, u64)> = units.iter().copied().filter(|&(c, k)| !unit_dir(&cfg.out, c, k).join(&scores_name).exists()).collect();
+    let dir_of = |c: Condition, k: u64| unit_dir(&cfg.out, c, k, cfg.redraw);
+    let todo: Vec<(Condition, u64)> = units.iter().copied().filter(|&(c, k)| !dir_of(c, k).join(&scores_name).exists()).collect();
     // Units trained before (scored on another benchmark) are only scored: no data to build for them.
-    let to_train: Vec<(Condition, u64)> = todo.iter().copied().filter(|&(c, k)| c.trains() && !trained(&unit_dir(&cfg.out, c, k))).collect();
+    let to_train: Vec<(Condition, u64)> = todo.iter().copied().filter(|&(c, k)| c.trains() && !trained(&dir_of(c, k))).collect();
     let mut notes = Vec::new();
-    let data = if !to_train.is_empty() {
-        let conds: Vec<Condition> = to_train.iter().map(|u| u.0).collect();
-        Some(prepare_data(cfg, &conds, &mut notes, log)?)
-    } else {
+    let pools = if to_train.is_empty() {
         None
+    } else {
+        let conds: Vec<Condition> = to_train.iter().map(|u| u.0).collect();
+        Some(build_pools(cfg, &conds, log)?)
     };
+    // The draws the units to train need, each made once.
+    let mut draws: BTreeMap<u64, TrainingData> = BTreeMap::new();
     let bar = crate::runtime::progress::bar(units.len() as u64, cfg.progress, "units");
     bar.inc((units.len() - todo.len()) as u64);
     for &(c, k) in &todo {
-        let dir = unit_dir(&cfg.out, c, k);
+        let dir = dir_of(c, k);
         let descriptor = if c.trains() {
             if to_train.contains(&(c, k)) {
-                let pairs = condition_pairs(c, data.as_ref().expect("prepared"), cfg.classical.seed);
+                let d = draw_index(k, cfg.redraw);
+                let pools = pools.as_ref().expect("built for the units to train");
+                let data = draws.entry(d).or_insert_with(|| draw(cfg, pools, d, &mut notes));
+                let pairs = condition_pairs(c, data, cfg.classical.seed, d);
                 bar.set_message(format!("{} seed {k}: training on {} pairs", c.name(), pairs.len()));
                 log(&format!("{} seed {k}: training on {} pairs", c.name(), pairs.len()));
                 std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
@@ -226,7 +273,7 @@ pub fn run_boost(cfg: &BoostConfig, log: &mut dyn FnMut(&str)) -> Result<BoostRe
     let mut by_condition = units.clone();
     by_condition.sort();
     for &(c, k) in &by_condition {
-        results.entry(c).or_default().push(scores_file::read(&unit_dir(&cfg.out, c, k).join(&scores_name))?);
+        results.entry(c).or_default().push(scores_file::read(&dir_of(c, k).join(&scores_name))?);
     }
     let (table, paired) = summarize(&results);
     let text = format_text(&table, &paired);
