@@ -1,7 +1,8 @@
 //! The boost table: per benchmark and sample count, each condition's FMR / IR / RR as the mean over its
 //! training seeds with the min–max spread, and the paired IR differences between conditions with a 95 %
 //! interval over pairs × seeds (seed k of one condition against seed k of the other; C0, untrained, is
-//! the same for every k).
+//! the same for every k) and a second one over the seeds' mean differences, the one to read when the seeds
+//! also draw their own training pairs (`--redraw`): pairs of one draw are not independent of each other.
 
 use super::conditions::{Condition, COMPARISONS};
 use crate::registration::report::{paired_difference, rows};
@@ -48,6 +49,10 @@ pub struct PairedRow {
     pub mean: f64,
     pub lo: f64,
     pub hi: f64,
+    /// Seeds compared, and the 95 % interval over their mean differences (NaN with one seed).
+    pub seeds: usize,
+    pub seed_lo: f64,
+    pub seed_hi: f64,
 }
 
 /// Each condition's scores per seed (C0: one entry) → the table's rows, by benchmark and sample count in
@@ -83,6 +88,7 @@ pub fn summarize(results: &BTreeMap<Condition, Vec<Vec<PairScore>>>) -> (Vec<Con
             let (Some(sa), Some(sb)) = (results.get(&a), results.get(&b)) else { continue };
             let seeds = sa.len().max(sb.len());
             let (mut va, mut vb) = (Vec::new(), Vec::new());
+            let (mut ma, mut mb) = (Vec::new(), Vec::new());
             for k in 0..seeds {
                 let sel = |v: &[PairScore]| -> Vec<(String, usize, usize, f64)> {
                     v.iter().filter(|s| &s.benchmark == bench && s.samples == *n).map(|s| (s.scene.clone(), s.i, s.j, 100.0 * s.inlier_ratio)).collect()
@@ -91,12 +97,17 @@ pub fn summarize(results: &BTreeMap<Condition, Vec<Vec<PairScore>>>) -> (Vec<Con
                 assert!(x.iter().map(|t| (&t.0, t.1, t.2)).eq(y.iter().map(|t| (&t.0, t.1, t.2))), "conditions scored on different pairs");
                 va.extend(x.iter().map(|t| t.3));
                 vb.extend(y.iter().map(|t| t.3));
+                if !x.is_empty() {
+                    ma.push(x.iter().map(|t| t.3).sum::<f64>() / x.len() as f64);
+                    mb.push(y.iter().map(|t| t.3).sum::<f64>() / y.len() as f64);
+                }
             }
             if va.is_empty() {
                 continue;
             }
             let (mean, lo, hi) = paired_difference(&va, &vb);
-            paired.push(PairedRow { benchmark: bench.clone(), samples: *n, a, b, n: va.len(), mean, lo, hi });
+            let (_, seed_lo, seed_hi) = paired_difference(&ma, &mb);
+            paired.push(PairedRow { benchmark: bench.clone(), samples: *n, a, b, n: va.len(), mean, lo, hi, seeds: ma.len(), seed_lo, seed_hi });
         }
     }
     (table, paired)
@@ -124,9 +135,18 @@ pub fn format_text(table: &[ConditionRow], paired: &[PairedRow]) -> String {
         }
         let rows: Vec<&PairedRow> = paired.iter().filter(|p| p.benchmark == bench && p.samples == n).collect();
         if !rows.is_empty() {
-            let _ = writeln!(out, "paired IR difference (percentage points, 95% CI over pairs x seeds)");
+            let _ = writeln!(out, "paired IR difference (percentage points, 95% CI over pairs x seeds; and over the seeds' mean differences)");
             for p in rows {
-                let _ = writeln!(out, "  {:<12} {:>6} values  {:+.2} [{:+.2}, {:+.2}]", format!("{} - {}", p.a.name(), p.b.name()), p.n, p.mean, p.lo, p.hi);
+                let over_seeds = if p.seeds >= 2 { format!("  over {} seeds [{:+.2}, {:+.2}]", p.seeds, p.seed_lo, p.seed_hi) } else { String::new() };
+                let _ = writeln!(
+                    out,
+                    "  {:<12} {:>6} values  {:+.2} [{:+.2}, {:+.2}]{over_seeds}",
+                    format!("{} - {}", p.a.name(), p.b.name()),
+                    p.n,
+                    p.mean,
+                    p.lo,
+                    p.hi
+                );
             }
         }
         out.push('\n');
@@ -146,9 +166,23 @@ pub fn format_csv(table: &[ConditionRow]) -> String {
 
 /// The paired differences as CSV.
 pub fn format_paired_csv(paired: &[PairedRow]) -> String {
-    let mut out = String::from("benchmark,samples,a,b,values,ir_diff_pp,ci_lo,ci_hi\n");
+    let mut out = String::from("benchmark,samples,a,b,values,ir_diff_pp,ci_lo,ci_hi,seeds,seed_ci_lo,seed_ci_hi\n");
     for p in paired {
-        let _ = writeln!(out, "{},{},{},{},{},{:.4},{:.4},{:.4}", p.benchmark, p.samples, p.a.name(), p.b.name(), p.n, p.mean, p.lo, p.hi);
+        let _ = writeln!(
+            out,
+            "{},{},{},{},{},{:.4},{:.4},{:.4},{},{:.4},{:.4}",
+            p.benchmark,
+            p.samples,
+            p.a.name(),
+            p.b.name(),
+            p.n,
+            p.mean,
+            p.lo,
+            p.hi,
+            p.seeds,
+            p.seed_lo,
+            p.seed_hi
+        );
     }
     out
 }
@@ -191,6 +225,11 @@ mod tests {
         assert_eq!((p.a, p.b, p.n), (Condition::C1, Condition::C0, 4));
         assert!((p.mean - 10.0).abs() < 1e-9);
         assert!((p.hi - p.mean - 3.182446 * 5.0).abs() < 1e-2 && (p.mean - p.lo - 3.182446 * 5.0).abs() < 1e-2, "{p:?}");
-        assert!(format_text(&table, &paired).contains("C1 - C0"));
+        // Over seeds: seed 0's mean difference 5, seed 1's 15; mean 10, sd 7.071, t(1) = 12.706, half
+        // width 12.706 * 7.071 / sqrt(2) = 63.53.
+        assert_eq!(p.seeds, 2);
+        assert!((p.seed_hi - 73.53).abs() < 1e-2 && (p.seed_lo + 53.53).abs() < 1e-2, "{p:?}");
+        let text = format_text(&table, &paired);
+        assert!(text.contains("C1 - C0") && text.contains("over 2 seeds [-53.53, +73.53]"), "{text}");
     }
 }
