@@ -27,7 +27,7 @@ ceil(1.25 * pairs / frames) views per frame). Each condition x seed trains the d
 with the same --out scores the trained units again without retraining them. Writes <out>/boost.txt (the \
 table: FMR / IR / RR mean [min-max] over seeds per condition, benchmark and sample count, and the paired IR differences C1-C0, \
 C3-C0, C3-C2, C4-C3, C5-C1, C5x2-C1, C6-C1, C6x2-C1 with 95 % CIs over pairs x seeds and over the seeds' mean differences, \
-the one to read with --redraw), boost.csv and boost-paired.csv."
+the one to read when comparing training conditions: a training run moves all its pairs together; with --redraw it also covers the draw), boost.csv and boost-paired.csv."
 )]
 pub struct EvalBoostArgs {
     /// Evaluation benchmark folder (`pointreggpt fragments`, e.g. --single-frames of held-out frames).

@@ -1,8 +1,9 @@
 //! The boost table: per benchmark and sample count, each condition's FMR / IR / RR as the mean over its
 //! training seeds with the min–max spread, and the paired IR differences between conditions with a 95 %
 //! interval over pairs × seeds (seed k of one condition against seed k of the other; C0, untrained, is
-//! the same for every k) and a second one over the seeds' mean differences, the one to read when the seeds
-//! also draw their own training pairs (`--redraw`): pairs of one draw are not independent of each other.
+//! the same for every k) and a second one over the seeds' mean differences, the one to read when comparing
+//! training conditions: one training run moves all its pairs' scores together, so they are not independent
+//! (with `--redraw` the seeds also differ in their training pairs, and this interval covers that draw too).
 
 use super::conditions::{Condition, COMPARISONS};
 use crate::registration::report::{paired_difference, rows};
