@@ -97,7 +97,7 @@ fn for_draw(base: Rng, d: u64) -> Rng {
 /// A unit's scores on one scoring: `scores-<key>.tsv`, the key a hash of the benchmark folder (its
 /// canonical path), the benchmarks selected of it and the evaluation settings, so a run on another
 /// benchmark or with other sample counts scores the trained units again instead of reusing these.
-pub fn scores_file(cfg: &BoostConfig) -> Result<String> {
+pub fn scores_name(cfg: &BoostConfig) -> Result<String> {
     let bench = std::fs::canonicalize(&cfg.bench).map_err(|e| Error::io(&cfg.bench, e))?;
     let mut only = cfg.only.clone();
     only.sort();
@@ -116,11 +116,11 @@ fn trained(dir: &Path) -> bool {
 /// The keys and overlaps of a unit's training pairs.
 pub const TRAINING_PAIRS: &str = "training-pairs.tsv";
 
-/// A seeded subset of `k` of `pairs` (all when fewer), in their order.
-fn subset(pairs: &[OverlapPair], k: usize, rng: &mut Rng) -> Vec<OverlapPair> {
-    let mut idx = sample_indices(pairs.len(), k, rng);
+/// A seeded subset of `k` of `items` (all when fewer), in their order.
+fn subset<T: Copy>(items: &[T], k: usize, rng: &mut Rng) -> Vec<T> {
+    let mut idx = sample_indices(items.len(), k, rng);
     idx.sort_unstable();
-    idx.into_iter().map(|i| pairs[i].clone()).collect()
+    idx.into_iter().map(|i| items[i]).collect()
 }
 
 /// The pools the training pairs are drawn from: every real candidate pair and every pair each generator
@@ -131,11 +131,11 @@ struct Pools {
     generated: BTreeMap<Generator, (Vec<OverlapPair>, u64)>,
 }
 
-/// One draw of the training pairs: the real ones (matched to the drawn classical pairs' overlap
-/// histogram) and each generator's, at most `cfg.pairs` of each.
+/// One draw of the training pairs, as indices into the [`Pools`]: the real ones (matched to the drawn
+/// classical pairs' overlap histogram) and each generator's, at most `cfg.pairs` of each.
 struct TrainingData {
-    real: Vec<OverlapPair>,
-    generated: BTreeMap<Generator, Vec<OverlapPair>>,
+    real: Vec<usize>,
+    generated: BTreeMap<Generator, Vec<usize>>,
 }
 
 fn build_pools(cfg: &BoostConfig, todo: &[Condition], log: &mut dyn FnMut(&str)) -> Result<Pools> {
@@ -171,13 +171,13 @@ fn draw(cfg: &BoostConfig, pools: &Pools, d: u64, notes: &mut Vec<String>) -> Tr
     for (&g, (pairs, seed)) in &pools.generated {
         let mut idx = sample_indices(pairs.len(), cfg.pairs, &mut for_draw(Rng::new(*seed).fork(g as u64), d));
         idx.sort_unstable();
-        let chosen: Vec<OverlapPair> = idx.into_iter().map(|i| pairs[i].clone()).collect();
-        notes.push(format!("{}{tag}: {} generated pairs{}", g.name(), chosen.len(), if chosen.len() < cfg.pairs { " (all the build made: fewer than --pairs)" } else { "" }));
-        generated.insert(g, chosen);
+        notes.push(format!("{}{tag}: {} generated pairs{}", g.name(), idx.len(), if idx.len() < cfg.pairs { " (all the build made: fewer than --pairs)" } else { "" }));
+        generated.insert(g, idx);
     }
     let mut real = Vec::new();
     if let Some(candidates) = &pools.real {
-        let reference: Vec<f64> = generated[&Generator::Classical].iter().map(|p| p.overlap).collect();
+        let classical = &pools.generated[&Generator::Classical].0;
+        let reference: Vec<f64> = generated[&Generator::Classical].iter().map(|&i| classical[i].overlap).collect();
         let overlaps: Vec<f64> = candidates.iter().map(|p| p.overlap).collect();
         let m = match_histogram(&overlaps, &reference, &EDGES, cfg.pairs, &mut for_draw(Rng::new(cfg.classical.seed).fork(77), d));
         notes.push(format!(
@@ -189,19 +189,20 @@ fn draw(cfg: &BoostConfig, pools: &Pools, d: u64, notes: &mut Vec<String>) -> Tr
             m.indices.len(),
             if m.complete { String::new() } else { format!(" (fewer than --pairs {}: the scarcest bin allows no more at this histogram)", cfg.pairs) }
         ));
-        real = m.indices.iter().map(|&i| candidates[i].clone()).collect();
+        real = m.indices;
     }
     TrainingData { real, generated }
 }
 
 /// The pairs condition `c` trains on.
-fn condition_pairs(c: Condition, data: &TrainingData, seed: u64, d: u64) -> Vec<OverlapPair> {
-    let empty = Vec::new();
-    let generated = c.generator().and_then(|g| data.generated.get(&g)).unwrap_or(&empty);
+fn condition_pairs<'a>(c: Condition, pools: &'a Pools, data: &TrainingData, seed: u64, d: u64) -> Vec<&'a OverlapPair> {
+    let generated: &[usize] = c.generator().and_then(|g| data.generated.get(&g)).map_or(&[], |v| v);
+    let pool: &'a [OverlapPair] = c.generator().and_then(|g| pools.generated.get(&g)).map_or(&[], |(p, _)| p);
+    let real: &'a [OverlapPair] = pools.real.as_deref().unwrap_or(&[]);
     let (r, g) = c.mix(data.real.len(), generated.len());
     let rng = for_draw(Rng::new(seed).fork(c as u64), d);
-    let mut out = subset(&data.real, r, &mut rng.fork(0));
-    out.extend(subset(generated, g, &mut rng.fork(1)));
+    let mut out: Vec<&OverlapPair> = subset(&data.real, r, &mut rng.fork(0)).into_iter().map(|i| &real[i]).collect();
+    out.extend(subset(generated, g, &mut rng.fork(1)).into_iter().map(|i| &pool[i]));
     out
 }
 
@@ -225,7 +226,7 @@ pub fn run_boost(cfg: &BoostConfig, log: &mut dyn FnMut(&str)) -> Result<BoostRe
     // Seed-major: every condition's seed 0 first, so an interrupted run has compared all conditions once.
     let units: Vec<(Condition, u64)> =
         (0..cfg.seeds).flat_map(|k| cfg.conditions.iter().filter(move |c| c.trains() || k == 0).map(move |&c| (c, k))).collect();
-    let scores_name = scores_file(cfg)?;
+    let scores_name = scores_name(cfg)?;
     let dir_of = |c: Condition, k: u64| unit_dir(&cfg.out, c, k, cfg.redraw);
     let todo: Vec<(Condition, u64)> = units.iter().copied().filter(|&(c, k)| !dir_of(c, k).join(&scores_name).exists()).collect();
     // Units trained before (scored on another benchmark) are only scored: no data to build for them.
@@ -248,13 +249,13 @@ pub fn run_boost(cfg: &BoostConfig, log: &mut dyn FnMut(&str)) -> Result<BoostRe
                 let d = draw_index(k, cfg.redraw);
                 let pools = pools.as_ref().expect("built for the units to train");
                 let data = draws.entry(d).or_insert_with(|| draw(cfg, pools, d, &mut notes));
-                let pairs = condition_pairs(c, data, cfg.classical.seed, d);
+                let pairs = condition_pairs(c, pools, data, cfg.classical.seed, d);
                 bar.set_message(format!("{} seed {k}: training on {} pairs", c.name(), pairs.len()));
                 log(&format!("{} seed {k}: training on {} pairs", c.name(), pairs.len()));
                 std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
                 let listing: String = pairs.iter().map(|p| format!("{}\t{}\n", p.pair.key, p.overlap)).collect();
                 write_atomic(&dir, &dir.join(TRAINING_PAIRS), format!("key\toverlap\n{listing}").as_bytes(), Publish::Replace)?;
-                let pairs: Vec<TrainPair> = pairs.into_iter().map(|p| p.pair).collect();
+                let pairs: Vec<TrainPair> = pairs.into_iter().map(|p| p.pair.clone()).collect();
                 let opts = DescriptorTrainOptions { seed: k, out: dir.clone(), resume: true, progress: false, ..cfg.train.clone() };
                 train_descriptor(&pairs, &opts, |_| {})?;
             }
