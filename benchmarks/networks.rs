@@ -32,7 +32,7 @@ use tch::{nn, Device, Kind, Tensor};
 
 #[path = "common/mod.rs"]
 mod common;
-use common::{cpu_model, load_average};
+use common::{cpu_model, load_average, median_ms};
 
 /// libtorch intra-op threads of both sides (the machine has 2 cores).
 const THREADS: i32 = 2;
@@ -96,24 +96,6 @@ fn threads() -> i32 {
             .unwrap_or_else(|| fail(&format!("POINTREGGPT_BENCH_THREADS={v} is not a positive integer"))),
         _ => THREADS,
     }
-}
-
-/// Median wall time in ms of `f` over `reps` runs after `warmup` runs, and its last result.
-fn median_ms<T>(warmup: usize, reps: usize, mut f: impl FnMut() -> T) -> (f64, T) {
-    let mut out = None;
-    for _ in 0..warmup {
-        out = Some(f());
-    }
-    let mut times = Vec::with_capacity(reps);
-    for _ in 0..reps {
-        let start = Instant::now();
-        out = Some(f());
-        times.push(start.elapsed().as_secs_f64() * 1e3);
-    }
-    times.sort_by(f64::total_cmp);
-    let mid = times.len() / 2;
-    let median = if times.len() % 2 == 0 { (times[mid - 1] + times[mid]) / 2.0 } else { times[mid] };
-    (median, out.expect("at least one run"))
 }
 
 fn sorted_variables(vs: &nn::VarStore) -> Vec<(String, Tensor)> {

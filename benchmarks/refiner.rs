@@ -24,6 +24,11 @@ use tch::{nn, Device};
 mod common;
 use common::{cpu_model, load_average};
 
+/// Median wall time in ms of `f` over `REPS` runs after `WARMUP` runs.
+fn median_ms<T>(f: impl FnMut() -> T) -> f64 {
+    common::median_ms(WARMUP, REPS, f).0
+}
+
 const SIZE: u32 = 256;
 const WIDTHS: [i64; 3] = [8, 16, 32];
 const WARMUP: usize = 2;
@@ -133,20 +138,4 @@ fn denoiser(dim: i64) -> (nn::VarStore, Denoiser) {
     let vs = nn::VarStore::new(Device::Cpu);
     let net = Denoiser::new(&vs.root(), &config).unwrap_or_else(|e| panic!("denoiser dim {dim}: {e}"));
     (vs, net)
-}
-
-/// Median wall time in ms of `f` over `REPS` runs after `WARMUP` runs.
-fn median_ms<T>(mut f: impl FnMut() -> T) -> f64 {
-    for _ in 0..WARMUP {
-        std::hint::black_box(f());
-    }
-    let mut times: Vec<f64> = (0..REPS)
-        .map(|_| {
-            let start = Instant::now();
-            std::hint::black_box(f());
-            start.elapsed().as_secs_f64() * 1e3
-        })
-        .collect();
-    times.sort_by(f64::total_cmp);
-    times[REPS / 2]
 }

@@ -1,8 +1,9 @@
 //! Helpers the benchmark harnesses share (each includes this file with `#[path]`): the machine
-//! description and the `.npy` hand-off to the Python peers.
+//! description, a median timer and the `.npy` hand-off to the Python peers.
 #![allow(dead_code)]
 
 use std::path::Path;
+use std::time::Instant;
 
 /// The CPU model from `/proc/cpuinfo`.
 pub fn cpu_model() -> String {
@@ -39,4 +40,22 @@ pub fn write_npy(path: &Path, descr: &str, shape: &[usize], data: &[u8]) {
     bytes.extend(header.as_bytes());
     bytes.extend(data);
     std::fs::write(path, bytes).unwrap_or_else(|e| panic!("writing {}: {e}", path.display()));
+}
+
+/// Median wall time in ms of `f` over `reps` runs after `warmup` runs, and its last result.
+pub fn median_ms<T>(warmup: usize, reps: usize, mut f: impl FnMut() -> T) -> (f64, T) {
+    let mut out = None;
+    for _ in 0..warmup {
+        out = Some(f());
+    }
+    let mut times = Vec::with_capacity(reps);
+    for _ in 0..reps {
+        let start = Instant::now();
+        out = Some(f());
+        times.push(start.elapsed().as_secs_f64() * 1e3);
+    }
+    times.sort_by(f64::total_cmp);
+    let mid = times.len() / 2;
+    let median = if times.len() % 2 == 0 { (times[mid - 1] + times[mid]) / 2.0 } else { times[mid] };
+    (median, out.expect("at least one run"))
 }
