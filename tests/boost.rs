@@ -20,6 +20,11 @@ fn boost(bench: &Path, seq: &Path, out: &Path) -> String {
 }
 
 fn boost_with(bench: &Path, seq: &Path, out: &Path, extra: &[&str]) -> String {
+    run_ok(&boost_args(bench, seq, out, extra).iter().map(String::as_str).collect::<Vec<_>>())
+}
+
+/// The tiny run's arguments; `extra` is appended (a `--steps` in it replaces the tiny run's).
+fn boost_args(bench: &Path, seq: &Path, out: &Path, extra: &[&str]) -> Vec<String> {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let classical = root.join("pipelines/paper-3dmatch-classical.toml");
     let models = root.join("models");
@@ -29,8 +34,12 @@ fn boost_with(bench: &Path, seq: &Path, out: &Path, extra: &[&str]) -> String {
         "--real-every", "1", "--real-gaps", "2,4,6,8,10,12,14,16,18,20", "--classical-config", classical.to_str().unwrap(),
         "--models", models.to_str().unwrap(), "--out", out.to_str().unwrap(), "--quiet",
     ];
+    if extra.contains(&"--steps") {
+        let i = args.iter().position(|a| *a == "--steps").unwrap();
+        args.drain(i..i + 2);
+    }
     args.extend_from_slice(extra);
-    run_ok(&args)
+    args.into_iter().map(str::to_string).collect()
 }
 
 /// A unit's scores files (one per benchmark scoring).
@@ -111,6 +120,16 @@ fn a_tiny_run_writes_the_table_deterministically_and_resumes_without_redoing_uni
     assert!(redrawn.contains("2 units scored (2 of them trained first), 3 already done"), "{redrawn}");
     let listing = |unit: &str| std::fs::read_to_string(a.join(unit).join("training-pairs.tsv")).unwrap();
     assert_ne!(listing("C1/seed-1-redrawn"), listing("C1/seed-1"), "a redraw draws other real pairs");
+
+    // Other training settings with the same --out are refused before any work, naming the record and
+    // the setting; the table and every unit stay as they were.
+    let before = std::fs::read_to_string(a.join("boost.txt")).unwrap();
+    let o = bin().args(boost_args(&bench, &seq, &a, &["--steps", "4"])).output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success(), "a rerun with other --steps must fail");
+    assert!(err.contains("boost-settings.json") && err.contains("train.steps: recorded 3, now 4"), "{err}");
+    assert_eq!(std::fs::read_to_string(a.join("boost.txt")).unwrap(), before);
+    assert_eq!(ck_mtimes, checkpoints.iter().map(|p| mtime(p)).collect::<Vec<_>>(), "no unit retrained");
 
     // Determinism: a second run from scratch gives the same table.
     boost(&bench, &seq, &b);

@@ -24,7 +24,8 @@ ceil(1.25 * pairs / frames) views per frame). Each condition x seed trains the d
 <out>/<condition>/seed-<k>/ and is scored on every pair of the benchmark folder with the same sampling and RANSAC seeds \
 (--eval-seed). A unit is skipped when its scores on this benchmark folder and these evaluation settings exist \
 (scores-<key>.tsv): rerun the same command to resume; a run on another benchmark (or --only, --samples, --eval-seed) \
-with the same --out scores the trained units again without retraining them. Writes <out>/boost.txt (the \
+with the same --out scores the trained units again without retraining them; other training settings (--pairs, --steps, \
+the model, the frames, the real gaps, the configs) with the same --out are refused (<out>/boost-settings.json records them). Writes <out>/boost.txt (the \
 table: FMR / IR / RR mean [min-max] over seeds per condition, benchmark and sample count, and the paired IR differences C1-C0, \
 C3-C0, C3-C2, C4-C3, C5-C1, C5x2-C1, C6-C1, C6x2-C1 with 95 % CIs over pairs x seeds and over the seeds' mean differences, \
 the one to read when comparing training conditions: a training run moves all its pairs together; with --redraw it also covers the draw), boost.csv and boost-paired.csv."
