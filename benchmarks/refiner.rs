@@ -5,9 +5,11 @@
 //! step from step 0, η 0 (the setting `docs/diffusion.md` measured): the background fill, one forward of
 //! the denoiser, the range–null-space step. Its cost does not depend on the weights, so each width is an
 //! untrained denoiser of the tiny preset's shape (levels 1, 2, 4, 8, no attention) at dim 8 (the tiny
-//! preset itself), 16 and 32. The view is a real re-projection hole pattern: a synthetic room's exact
-//! depth at frame 0 z-buffered into the camera of frame 40 at 256×256. Also timed: the background fill
-//! alone (the shipped default), and the refiner at `[inpaint] batch = 4` (per view).
+//! preset itself), 16 and 32. The view has the holes of a camera move: a synthetic room's exact depth at
+//! frame 0 z-buffered into the camera of frame 40 at 256×256. Each refiner is timed one view at a time
+//! and as two concurrent workers with their own refiner (how a build on 2 cores runs it), views one at a
+//! time or 4 per forward pass (`[inpaint] batch = 4`); the background fill alone (the shipped default)
+//! beside them.
 
 use nalgebra::Isometry3;
 use pointreggpt::geometry::{backproject, project_zbuffer, DepthMap, DepthRange, Intrinsics};
