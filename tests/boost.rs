@@ -23,7 +23,7 @@ fn boost_with(bench: &Path, seq: &Path, out: &Path, extra: &[&str]) -> String {
     run_ok(&boost_args(bench, seq, out, extra).iter().map(String::as_str).collect::<Vec<_>>())
 }
 
-/// The tiny run's arguments; `extra` is appended (a `--steps` in it replaces the tiny run's).
+/// The tiny run's arguments; `extra` is appended (an option in it replaces the tiny run's).
 fn boost_args(bench: &Path, seq: &Path, out: &Path, extra: &[&str]) -> Vec<String> {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let classical = root.join("pipelines/paper-3dmatch-classical.toml");
@@ -34,9 +34,10 @@ fn boost_args(bench: &Path, seq: &Path, out: &Path, extra: &[&str]) -> Vec<Strin
         "--real-every", "1", "--real-gaps", "2,4,6,8,10,12,14,16,18,20", "--classical-config", classical.to_str().unwrap(),
         "--models", models.to_str().unwrap(), "--out", out.to_str().unwrap(), "--quiet",
     ];
-    if extra.contains(&"--steps") {
-        let i = args.iter().position(|a| *a == "--steps").unwrap();
-        args.drain(i..i + 2);
+    for flag in extra.iter().filter(|a| a.starts_with("--")) {
+        if let Some(i) = args.iter().position(|a| a == flag) {
+            args.drain(i..i + 2);
+        }
     }
     args.extend_from_slice(extra);
     args.into_iter().map(str::to_string).collect()
@@ -130,6 +131,12 @@ fn a_tiny_run_writes_the_table_deterministically_and_resumes_without_redoing_uni
     assert!(err.contains("boost-settings.json") && err.contains("train.steps: recorded 3, now 4"), "{err}");
     assert_eq!(std::fs::read_to_string(a.join("boost.txt")).unwrap(), before);
     assert_eq!(ck_mtimes, checkpoints.iter().map(|p| mtime(p)).collect::<Vec<_>>(), "no unit retrained");
+
+    // Conditions that read no network run without the models folder (the record names it as given).
+    let c = dir.path().join("c");
+    let no_models = c.join("no-models");
+    boost_with(&bench, &seq, &c, &["--conditions", "C0", "--models", no_models.to_str().unwrap()]);
+    assert!(std::fs::read_to_string(c.join("boost-settings.json")).unwrap().contains("no-models"));
 
     // Determinism: a second run from scratch gives the same table.
     boost(&bench, &seq, &b);

@@ -112,12 +112,13 @@ pub const SETTINGS: &str = "boost-settings.json";
 
 /// What the training of every unit depends on (not which conditions and seeds are run, nor the scoring,
 /// which is keyed by [`scores_name`]), as JSON with one key per setting.
-fn training_settings(cfg: &BoostConfig) -> Result<serde_json::Value> {
-    let canonical = |p: &Path| std::fs::canonicalize(p).map(|p| p.display().to_string()).map_err(|e| Error::io(p, e));
+fn training_settings(cfg: &BoostConfig) -> serde_json::Value {
+    // Canonical where the path exists (the models folder need not: only C4 and C6 read it).
+    let canonical = |p: &Path| std::fs::canonicalize(p).unwrap_or_else(|_| p.to_path_buf()).display().to_string();
     // Per-unit fields are set by the run; the rest is what a unit trains with.
     let train = DescriptorTrainOptions { seed: 0, resume: true, progress: false, ..cfg.train.clone() };
-    Ok(serde_json::json!({
-        "sequence": canonical(&cfg.sequence)?,
+    serde_json::json!({
+        "sequence": canonical(&cfg.sequence),
         "first": cfg.first,
         "frames": cfg.frames,
         "real_every": cfg.real_every,
@@ -125,14 +126,14 @@ fn training_settings(cfg: &BoostConfig) -> Result<serde_json::Value> {
         "pairs": cfg.pairs,
         "train": train,
         "classical": cfg.classical,
-        "models": canonical(&cfg.models)?,
-    }))
+        "models": canonical(&cfg.models),
+    })
 }
 
 /// Records the run's training settings in `<out>/boost-settings.json`, or checks them against the ones
 /// recorded, naming every setting that differs.
 fn check_settings(cfg: &BoostConfig) -> Result<()> {
-    let now = training_settings(cfg)?;
+    let now = training_settings(cfg);
     let path = cfg.out.join(SETTINGS);
     match std::fs::read_to_string(&path) {
         Ok(text) => {
