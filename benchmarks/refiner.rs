@@ -58,17 +58,17 @@ fn main() {
     println!("{}", "-".repeat(106));
     println!("{:<46} {:>9} {:>12.1} {:>12} {:>14} {:>8}", "background (the shipped default)", "-", fill_ms, "-", "-", verdict(fill_ms));
     for dim in WIDTHS {
-        let params = parameter_count(&denoiser(dim).0);
         // A refiner pads a short batch to its batch size, and a build gives each worker its own.
-        let refiner = |batch: usize| {
-            let (vs, net) = denoiser(dim);
+        let refiner = |(vs, net): (nn::VarStore, Denoiser), batch: usize| {
             let sampler = SamplerOptions { steps: 1, eta: 0.0, start_step: Some(0), resample: None };
             DiffusionInpainter::new(vs, net, sampler).with_start(Start::Background).with_batch(batch)
         };
-        let single = refiner(1);
+        let first = denoiser(dim);
+        let params = parameter_count(&first.0);
+        let single = refiner(first, 1);
         let one = median_ms(|| single.inpaint(&depth, &known, &ctx));
-        let two = two_workers(&[refiner(1), refiner(1)], 1, &depth, &known, &ctx);
-        let two_b4 = two_workers(&[refiner(4), refiner(4)], 4, &depth, &known, &ctx);
+        let two = two_workers(&[refiner(denoiser(dim), 1), refiner(denoiser(dim), 1)], 1, &depth, &known, &ctx);
+        let two_b4 = two_workers(&[refiner(denoiser(dim), 4), refiner(denoiser(dim), 4)], 4, &depth, &known, &ctx);
         let name = format!("background + 1-step refiner, dim {dim}{}", if dim == 8 { " (tiny)" } else { "" });
         println!("{:<46} {:>9} {:>12.1} {:>12.1} {:>14.1} {:>8}", name, params, one, two, two_b4, verdict(two.min(two_b4)));
     }

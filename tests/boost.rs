@@ -34,9 +34,11 @@ fn boost_args(bench: &Path, seq: &Path, out: &Path, extra: &[&str]) -> Vec<Strin
         "--real-every", "1", "--real-gaps", "2,4,6,8,10,12,14,16,18,20", "--classical-config", classical.to_str().unwrap(),
         "--models", models.to_str().unwrap(), "--out", out.to_str().unwrap(), "--quiet",
     ];
+    // An option given in `extra` replaces the default one: the flag, and its value when it takes one.
     for flag in extra.iter().filter(|a| a.starts_with("--")) {
         if let Some(i) = args.iter().position(|a| a == flag) {
-            args.drain(i..i + 2);
+            let takes_value = args.get(i + 1).is_some_and(|v| !v.starts_with("--"));
+            args.drain(i..=i + usize::from(takes_value));
         }
     }
     args.extend_from_slice(extra);

@@ -5,13 +5,15 @@
 //!
 //! Files: [`conditions`] (C0–C6 and what each trains on), [`histogram`] (real pairs subsampled to the
 //! generated overlap histogram), [`data`] (the real and generated training pairs), [`scores_file`]
-//! (one unit's scores, written atomically), [`table`] (the summary) and [`run`] (the resumable protocol).
+//! (one unit's scores, written atomically), [`settings`] (the recorded training settings a rerun must
+//! match), [`table`] (the summary) and [`run`] (the resumable protocol).
 
 pub mod conditions;
 pub mod data;
 pub mod histogram;
 pub mod run;
 pub mod scores_file;
+pub mod settings;
 pub mod table;
 
 pub use conditions::Condition;

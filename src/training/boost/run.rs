@@ -10,6 +10,7 @@ use super::conditions::{Condition, Generator};
 use super::data::{generated_pairs, generator_config, open_one, real_pairs, OverlapPair};
 use super::histogram::{histogram, match_histogram, EDGES};
 use super::scores_file;
+use super::settings;
 use super::table::{format_csv, format_paired_csv, format_text, summarize};
 use crate::atomic::{write_atomic, Publish};
 use crate::error::{Error, Result};
@@ -106,10 +107,6 @@ pub fn scores_name(cfg: &BoostConfig) -> Result<String> {
     Ok(format!("scores-{}.tsv", &blake3::hash(key.as_bytes()).to_hex()[..16]))
 }
 
-/// The settings a run's units and generated pairs were made with, in `<out>`: a rerun with other
-/// settings would mix units trained differently in one table, so it is refused.
-pub const SETTINGS: &str = "boost-settings.json";
-
 /// What the training of every unit depends on (not which conditions and seeds are run, nor the scoring,
 /// which is keyed by [`scores_name`]), as JSON with one key per setting.
 fn training_settings(cfg: &BoostConfig) -> serde_json::Value {
@@ -128,56 +125,6 @@ fn training_settings(cfg: &BoostConfig) -> serde_json::Value {
         "classical": cfg.classical,
         "models": canonical(&cfg.models),
     })
-}
-
-/// Records the run's training settings in `<out>/boost-settings.json`, or checks them against the ones
-/// recorded, naming every setting that differs.
-fn check_settings(cfg: &BoostConfig) -> Result<()> {
-    let now = training_settings(cfg);
-    let path = cfg.out.join(SETTINGS);
-    match std::fs::read_to_string(&path) {
-        Ok(text) => {
-            let before: serde_json::Value = serde_json::from_str(&text).map_err(|e| Error::input(&path, format!("not readable JSON: {e}")))?;
-            let mut lines = Vec::new();
-            json_differences("", &before, &now, &mut lines);
-            if lines.is_empty() {
-                return Ok(());
-            }
-            Err(Error::input(
-                &path,
-                format!(
-                    "this run's units were trained with other settings; a table mixing them would compare unlike units. \
-                     Rerun with the recorded settings, or give another --out:\n{}",
-                    lines.join("\n")
-                ),
-            ))
-        }
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
-            std::fs::create_dir_all(&cfg.out).map_err(|e| Error::io(&cfg.out, e))?;
-            let text = serde_json::to_string_pretty(&now).expect("JSON values serialise");
-            write_atomic(&cfg.out, &path, format!("{text}\n").as_bytes(), Publish::Replace).map(|_| ())
-        }
-        Err(e) => Err(Error::io(&path, e)),
-    }
-}
-
-/// Every leaf setting in which `now` differs from `before`, as `  a.b: recorded X, now Y`.
-fn json_differences(at: &str, before: &serde_json::Value, now: &serde_json::Value, out: &mut Vec<String>) {
-    use serde_json::Value;
-    match (before, now) {
-        (Value::Object(b), Value::Object(n)) => {
-            let mut keys: Vec<&String> = b.keys().chain(n.keys()).collect();
-            keys.sort();
-            keys.dedup();
-            let null = Value::Null;
-            for k in keys {
-                let path = if at.is_empty() { k.clone() } else { format!("{at}.{k}") };
-                json_differences(&path, b.get(k).unwrap_or(&null), n.get(k).unwrap_or(&null), out);
-            }
-        }
-        (b, n) if b != n => out.push(format!("  {at}: recorded {b}, now {n}")),
-        _ => {}
-    }
 }
 
 /// Whether a unit finished training: its scores are written only after training, so any scores file
@@ -298,7 +245,7 @@ pub fn run_boost(cfg: &BoostConfig, log: &mut dyn FnMut(&str)) -> Result<BoostRe
     if benches.is_empty() {
         return Err(Error::input(&cfg.bench, "no benchmark pairs to score (check --only)"));
     }
-    check_settings(cfg)?;
+    settings::check(&cfg.out, &training_settings(cfg))?;
     // Seed-major: every condition's seed 0 first, so an interrupted run has compared all conditions once.
     let units: Vec<(Condition, u64)> =
         (0..cfg.seeds).flat_map(|k| cfg.conditions.iter().filter(move |c| c.trains() || k == 0).map(move |&c| (c, k))).collect();
