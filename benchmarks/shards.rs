@@ -41,6 +41,8 @@ fn row(i: u64, rng: &mut Rng) -> PairRow {
         pose_draws: 1,
         source_points: cloud(rng, 10_000),
         target_points: cloud(rng, 9_000),
+        target_known_share: (0..9_000).map(|k| if k % 4 == 0 { 0.0 } else { 1.0 }).collect(),
+        target_view: vec![0; 9_000],
         overlap_source: rng.uniform(),
         overlap_target: rng.uniform(),
         source_depth_png: png(rng),

@@ -53,10 +53,11 @@ fn scores_files(unit: &Path) -> Vec<PathBuf> {
     v
 }
 
-fn read_tsv(path: &Path) -> Vec<(String, f64)> {
+/// `training-pairs.tsv`: (key, overlap, source-side overlap) per line.
+fn read_tsv(path: &Path) -> Vec<(String, f64, f64)> {
     std::fs::read_to_string(path).unwrap().lines().skip(1).map(|l| {
-        let (k, v) = l.split_once('\t').unwrap();
-        (k.to_string(), v.parse().unwrap())
+        let f: Vec<&str> = l.split('\t').collect();
+        (f[0].to_string(), f[1].parse().unwrap(), f[2].parse().unwrap())
     }).collect()
 }
 
@@ -75,7 +76,7 @@ fn a_tiny_run_writes_the_table_deterministically_and_resumes_without_redoing_uni
     let first = boost(&bench, &seq, &a);
     assert!(first.contains("5 units scored (4 of them trained first), 0 already done"), "{first}");
     let table = std::fs::read_to_string(a.join("boost.txt")).unwrap();
-    for want in ["C0 raw FPFH", "C1 real pairs", "C3 classical generator", "C1 - C0", "C3 - C0", "200 samples", "50 samples"] {
+    for want in ["C0 (fpfh)", "C1 (single)", "C3 (classical)", "C1 - C0", "C3 - C0", "200 samples", "50 samples"] {
         assert!(table.contains(want), "{want} missing from\n{table}");
     }
     let csv = std::fs::read_to_string(a.join("boost.csv")).unwrap();
@@ -144,10 +145,10 @@ fn a_tiny_run_writes_the_table_deterministically_and_resumes_without_redoing_uni
     boost(&bench, &seq, &b);
     assert_eq!(std::fs::read_to_string(b.join("boost.txt")).unwrap(), table);
 
-    // C1's real pairs follow C3's overlap histogram: C3's overlaps counted from the dataset's rows, and
-    // every 10 % bin of C1 within one pair of C3's share scaled to C1's count.
+    // C1's real pairs follow the source-side overlap histogram of C3's: C3's overlaps counted from the
+    // dataset's rows, and every 10 % bin of C1 within one pair of C3's share scaled to C1's count.
     let rows = Dataset::open(a.join("data/classical")).unwrap().read_pairs().unwrap();
-    let overlap: HashMap<String, f64> = rows.iter().map(|r| (r.pair_key.clone(), r.overlap_source.max(r.overlap_target))).collect();
+    let overlap: HashMap<String, f64> = rows.iter().map(|r| (r.pair_key.clone(), r.overlap_source)).collect();
     // Checked for the protocol's draw and for a redraw.
     let bins = |v: &[f64]| -> Vec<usize> {
         let mut h = vec![0usize; 9];
@@ -158,8 +159,8 @@ fn a_tiny_run_writes_the_table_deterministically_and_resumes_without_redoing_uni
         h
     };
     for seed in ["seed-0", "seed-1-redrawn"] {
-        let c3: Vec<f64> = read_tsv(&a.join("C3").join(seed).join("training-pairs.tsv")).iter().map(|(k, _)| overlap[k]).collect();
-        let c1: Vec<f64> = read_tsv(&a.join("C1").join(seed).join("training-pairs.tsv")).into_iter().map(|(_, o)| o).collect();
+        let c3: Vec<f64> = read_tsv(&a.join("C3").join(seed).join("training-pairs.tsv")).iter().map(|(k, _, _)| overlap[k]).collect();
+        let c1: Vec<f64> = read_tsv(&a.join("C1").join(seed).join("training-pairs.tsv")).into_iter().map(|(_, _, o)| o).collect();
         assert!(c3.len() >= 10 && c1.len() >= 5, "{seed}: {} generated, {} real pairs", c3.len(), c1.len());
         let (h3, h1) = (bins(&c3), bins(&c1));
         for b in 0..9 {
@@ -167,4 +168,83 @@ fn a_tiny_run_writes_the_table_deterministically_and_resumes_without_redoing_uni
             assert!((h1[b] as f64 - share).abs() < 1.0, "{seed}, bin {b}: {} real pairs, {share:.2} wanted ({h1:?} vs {h3:?})", h1[b]);
         }
     }
+}
+
+/// Frame index of a generated pair key `<scene>/frame-000015#3`.
+fn frame_of(key: &str) -> usize {
+    let frame = key.split('/').nth(1).unwrap();
+    frame.trim_start_matches("frame-").split('#').next().unwrap().parse().unwrap()
+}
+
+#[test]
+fn the_fragment_regime_runs_end_to_end() {
+    let dir = tempfile::tempdir().unwrap();
+    let (seq_root, other) = (dir.path().join("seq"), dir.path().join("other"));
+    run_ok(&["synth", "--out", seq_root.to_str().unwrap(), "--frames", "60", "--seed", "500"]);
+    run_ok(&["synth", "--out", other.to_str().unwrap(), "--frames", "40", "--seed", "200"]);
+    let (seq, held_out) = (seq_root.join("synthetic-500"), other.join("synthetic-200"));
+    // Two benchmark folders of the held-out scene: fused fragments (3DMatch / 3DLoMatch) and single frames.
+    let (frags, singles) = (dir.path().join("frags"), dir.path().join("singles"));
+    run_ok(&["fragments", held_out.to_str().unwrap(), "--frames-per-fragment", "10", "--stride", "5", "--out", frags.to_str().unwrap(), "--quiet"]);
+    run_ok(&["fragments", held_out.to_str().unwrap(), "--single-frames", "--out", singles.to_str().unwrap(), "--quiet"]);
+    // The training fragments' pairs, made by the `fragments` command: what `frag` must train on.
+    let train_frags = dir.path().join("train-frags");
+    run_ok(&["fragments", seq.to_str().unwrap(), "--frames-per-fragment", "10", "--stride", "5", "--out", train_frags.to_str().unwrap(), "--quiet"]);
+    let gt_pairs = |root: &Path, bench: &str| -> usize {
+        std::fs::read_to_string(root.join("metadata/benchmarks").join(bench).join("synthetic-500/gt.log")).map_or(0, |t| t.lines().count() / 5)
+    };
+    let fragment_pairs = gt_pairs(&train_frags, "3DMatch") + gt_pairs(&train_frags, "3DLoMatch");
+    assert!(fragment_pairs >= 8, "the test wants a few fragment pairs, got {fragment_pairs}");
+
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let out = dir.path().join("boost");
+    let classical = root.join("pipelines/paper-3dmatch-classical.toml");
+    let args = [
+        "eval", "boost", frags.to_str().unwrap(), singles.to_str().unwrap(), "--sequence", seq.to_str().unwrap(), "--first", "0", "--frames", "60",
+        "--conditions", "fpfh,frag,frag+nofill:2,frag+reproj:2,frag+single:2,frag4+nofill-lo:2",
+        "--fragment-frames", "10", "--fragment-stride", "5", "--source-frames", "fragment-starts", "--reference", "nofill",
+        "--seeds", "1", "--pairs", "100", "--epochs", "0.5", "--samples", "200", "--real-every", "1", "--real-gaps", "2,4,6,8,10,12",
+        "--classical-config", classical.to_str().unwrap(), "--out", out.to_str().unwrap(), "--quiet",
+    ];
+    let stdout = run_ok(&args);
+    assert!(stdout.contains("6 units scored (5 of them trained first), 0 already done"), "{stdout}");
+    let table = std::fs::read_to_string(out.join("boost.txt")).unwrap();
+    for want in ["3DMatch, 200 samples", "single-frame, 200 samples", "frag+nofill:2 - frag", "frag+single:2 - frag", "frag - fpfh"] {
+        assert!(table.contains(want), "{want} missing from\n{table}");
+    }
+    let listing = |unit: &str| read_tsv(&out.join(unit).join("seed-0/training-pairs.tsv"));
+    let (frag, nofill, reproj, single, scarce) =
+        (listing("frag"), listing("frag_nofill_2"), listing("frag_reproj_2"), listing("frag_single_2"), listing("frag4_nofill-lo_2"));
+    // `frag` trains on every pair of the training fragments, as the `fragments` command counts them.
+    assert_eq!(frag.len(), fragment_pairs);
+    let n = frag.len();
+    let generated = |l: &[(String, f64, f64)]| -> Vec<String> { l.iter().filter(|(k, _, _)| !k.contains("-fragments/")).map(|(k, _, _)| k.clone()).collect() };
+    // 2:1 mixes: the base's n real pairs, then 2n others.
+    for (name, l) in [("nofill", &nofill), ("reproj", &reproj), ("single", &single)] {
+        assert_eq!(l.len(), 3 * n, "{name}");
+        assert_eq!(l[..n].iter().map(|t| &t.0).collect::<Vec<_>>(), frag.iter().map(|t| &t.0).collect::<Vec<_>>(), "{name}: the same real base");
+    }
+    // Generated pairs come from the fragments' first frames (every 5th frame) and are paired unit by unit.
+    let (g_nofill, g_reproj) = (generated(&nofill), generated(&reproj));
+    assert_eq!(g_nofill.len(), 2 * n);
+    assert!(g_nofill.iter().chain(&g_reproj).all(|k| frame_of(k) % 5 == 0), "{g_nofill:?}");
+    assert_eq!(g_nofill, g_reproj, "the two generators' pairs share their units");
+    // The scarce-real condition: 4 real fragment pairs and 8 low-overlap-targeted generated ones.
+    assert_eq!(scarce.len(), 12);
+    assert_eq!(scarce.iter().filter(|(k, _, _)| k.contains("-fragments/")).count(), 4);
+    // -lo steers poses to lower overlaps: its pool has a larger share at 10-30 % (source side, from rows).
+    let low_share = |name: &str| -> f64 {
+        let rows = Dataset::open(out.join("data").join(name)).unwrap().read_pairs().unwrap();
+        let ok: Vec<f64> = rows.iter().filter(|r| r.status == pointreggpt::shards::Status::Ok).map(|r| r.overlap_source).collect();
+        ok.iter().filter(|&&o| o <= 0.3).count() as f64 / ok.len() as f64
+    };
+    assert!(low_share("nofill-lo") > low_share("nofill") + 0.2, "{} vs {}", low_share("nofill-lo"), low_share("nofill"));
+    // Training by exposure: half an epoch of 3n pairs at 4 pairs per step.
+    let last_step = |unit: &str| -> u64 {
+        let log = std::fs::read_to_string(out.join(unit).join("seed-0/loss.jsonl")).unwrap();
+        let line = log.lines().last().unwrap();
+        serde_json::from_str::<serde_json::Value>(line).unwrap()["step"].as_u64().unwrap()
+    };
+    assert_eq!(last_step("frag_nofill_2"), ((0.5 * (3 * n) as f64) / 4.0).ceil() as u64);
+    assert_eq!(last_step("frag"), ((0.5 * n as f64) / 4.0).ceil() as u64);
 }

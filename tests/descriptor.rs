@@ -44,7 +44,7 @@ fn matching_rate(pairs: &[TrainPair], describe: impl Fn(&[pointreggpt::geometry:
     let mut rng = Rng::new(5);
     for pair in pairs {
         let index = RadiusIndex::new(&pair.target, 0.0375);
-        let (si, ti): (Vec<usize>, Vec<usize>) = correspondences(pair, &index, 64, &mut rng).into_iter().unzip();
+        let (si, ti): (Vec<usize>, Vec<usize>) = correspondences(pair, &index, 64, false, &mut rng).into_iter().unzip();
         let (ds, dt) = (describe(&pair.source, &si), describe(&pair.target, &ti));
         for i in 0..si.len() {
             let dist = |j: usize| (0..dim).map(|c| (ds[i * dim + c] - dt[j * dim + c]).powi(2)).sum::<f32>();

@@ -70,6 +70,8 @@ fn row(u: u64) -> PairRow {
         target_intrinsics: [292.5, 292.5, 160.0 + g.unit(), 120.0],
         t_target_from_source: pose,
         pose_draws: 1 + g.below(5) as u32,
+        target_known_share: (0..target_points.len()).map(|i| (i % 3) as f32 * 0.5).collect(),
+        target_view: (0..target_points.len()).map(|i| (i % 2) as u8).collect(),
         source_points,
         target_points,
         // Multiples of 0.05 land on both sides of 0.4 by a rounding error: float64 keeps every reader equal.
@@ -174,7 +176,7 @@ fn pyarrow_and_duckdb_read_the_committed_shards() {
         report["files"],
         serde_json::json!(["pairs-000000.parquet", "pairs-000001.parquet", "pairs-000002.parquet"])
     );
-    assert_eq!(report["schema_versions"], serde_json::json!(["pairs/1"]));
+    assert_eq!(report["schema_versions"], serde_json::json!(["pairs/2"]));
 
     let want = expected(&rows);
     // Sanity of the expectation itself: every status occurs, and the 0.4 threshold splits the rows.

@@ -4,47 +4,64 @@
 use super::build::load_config;
 use crate::error::{Error, Result};
 use crate::registration::EvalConfig;
-use crate::training::boost::conditions::parse_list;
+use crate::training::boost::conditions::{parse_comparisons, parse_list, Condition, Source};
+use crate::training::boost::data::SourceFrames;
 use crate::training::boost::{run_boost, BoostConfig};
-use super::train_descriptor::DescriptorModelArgs;
+use super::train_descriptor::{DescriptorModelArgs, DescriptorTrainingArgs};
 use crate::training::descriptor::train::DescriptorTrainOptions;
 use std::io::Write;
 use std::path::PathBuf;
 
 #[derive(Debug, clap::Args)]
 #[command(
-    after_help = "Conditions: C0 raw FPFH (no training); C1 real single-frame pairs (f, f+g) of the training frames with their \
-captured poses (g in --real-gaps, both frames in the range, overlap >= 10 %), subsampled so that their overlap histogram (10 % bins) \
-matches C3's, --pairs of them or as many as the scarcest bin allows (data-notes.txt says which); C2 re-projection only (no \
-correction, no fill); C3 the classical generator (--classical-config: min-pool + background fill); C4 the neural generator \
-(U-Net correction + the hole-aware diffusion refiner, 1 step from push-pull, checkpoints in --models); C5 = C1 + C3 and C6 = \
-C1 + C4 at C1's pair count (half each); C5x2 / C6x2 at double (all of C1 + as many generated). Generated pairs are built \
-in-process from the training frames with the build pipeline into <out>/data/<generator>/ (--pairs of them, drawn from \
-ceil(1.25 * pairs / frames) views per frame). Each condition x seed trains the descriptor (--model, --steps) into \
-<out>/<condition>/seed-<k>/ and is scored on every pair of the benchmark folder with the same sampling and RANSAC seeds \
-(--eval-seed). A unit is skipped when its scores on this benchmark folder and these evaluation settings exist \
-(scores-<key>.tsv): rerun the same command to resume; a run on another benchmark (or --only, --samples, --eval-seed) \
-with the same --out scores the trained units again without retraining them; other training settings (--pairs, --steps, \
-the model, the frames, the real gaps, the configs) with the same --out are refused (<out>/boost-settings.json records them). Writes <out>/boost.txt (the \
-table: FMR / IR / RR mean [min-max] over seeds per condition, benchmark and sample count, and the paired IR differences C1-C0, \
-C3-C0, C3-C2, C4-C3, C5-C1, C5x2-C1, C6-C1, C6x2-C1 with 95 % CIs over pairs x seeds and over the seeds' mean differences, \
-the one to read when comparing training conditions: a training run moves all its pairs together; with --redraw it also covers the draw), boost.csv and boost-paired.csv."
+    after_help = "A condition is raw FPFH (fpfh) or components joined by '+', each with an optional factor ':f'. Real pairs: \
+'single' (real single-frame pairs (f, f+g) of the training frames with their captured poses, g in --real-gaps, overlap >= 10 %, \
+subsampled so that their source-side overlap histogram (10 % bins) matches the --reference generator's pairs), 'frag' (pairs of \
+fused fragments of the training frames: --fragment-frames frames every --fragment-stride frames, TSDF with the 3DMatch settings, \
+every pair at >= 10 % overlap, up to --pairs), 'fragN' (N of them: the scarce-real case). Generated pairs, built in-process from \
+the training frames with the build pipeline into <out>/data/<generator>/: 'reproj' (re-projection only), 'classical' \
+(--classical-config: min-pool + its fill), 'nofill' (min-pool, holes left empty), 'neural' (U-Net correction + the hole-aware \
+diffusion refiner, checkpoints in --models); '-lo' after one (e.g. nofill-lo) draws poses for a 3DLoMatch + 3DMatch mix \
+([pose.target], bins 10-30 % and above, half each). With a real component first (the base, n pairs), the others take floor(f*n) \
+pairs: 'frag+nofill:8' is the paper's 8:1 mix, 'frag+single:8' its control with real single frames instead. Without one, each \
+generated component takes floor(f*--pairs). Generated pairs of all generators are drawn paired unit by unit (the same source \
+frames and samples), and a condition takes the first pairs of each draw, so mixes at several ratios share their pairs. \
+--source-frames fragment-starts builds them from the first frame of each fragment, as the official generator does; every-frame \
+from every training frame.\n\n\
+The single-frame protocol's names still work: C0 = fpfh, C1 = single, C2 = reproj, C3 = classical, C4 = neural, C5 = \
+single:0.5+classical:0.5, C5x2 = single+classical, C6 = single:0.5+neural:0.5, C6x2 = single+neural (default: all nine).\n\n\
+Each condition x seed trains the descriptor (--model, --steps or --epochs, the training options) into <out>/<condition>/seed-<k>/ \
+and is scored on every pair of the benchmark folders with the same sampling and RANSAC seeds (--eval-seed). A unit is skipped \
+when its scores on these benchmark folders and evaluation settings exist (scores-<key>.tsv): rerun the same command to resume; \
+a run on other benchmarks (or --only, --samples, --eval-seed) with the same --out scores the trained units again without \
+retraining them; other training settings with the same --out are refused (<out>/boost-settings.json records them). Writes \
+<out>/boost.txt (the table: FMR / IR / RR mean [min-max] over seeds per condition, benchmark and sample count, and paired IR \
+differences with 95 % CIs over pairs x seeds and over the seeds' mean differences, the one to read when comparing training \
+conditions; with --redraw it also covers the draw of the training set), boost.csv and boost-paired.csv. The differences: the \
+single-frame protocol's (C1-C0, C3-C0, C3-C2, C4-C3, C5-C1, C5x2-C1, C6-C1, C6x2-C1), each mix against its base alone, each \
+single component against fpfh, and --compare."
 )]
 pub struct EvalBoostArgs {
-    /// Evaluation benchmark folder (`pointreggpt fragments`, e.g. --single-frames of held-out frames).
-    pub bench: PathBuf,
+    /// Evaluation benchmark folder(s) (`pointreggpt fragments` of held-out frames: fused fragments at
+    /// 3DMatch and 3DLoMatch overlaps, --single-frames pairs); several are scored in one run.
+    #[arg(required = true)]
+    pub bench: Vec<PathBuf>,
     /// The posed training sequence (one sequence folder, any layout `fragments` reads).
     #[arg(long)]
     pub sequence: PathBuf,
     /// First training frame.
     #[arg(long, default_value_t = 0)]
     pub first: usize,
-    /// Training frames from --first on (both frames of every real pair, and every generated pair's source, lie in them).
+    /// Training frames from --first on (both frames of every real pair, every fragment, and every generated
+    /// pair's source lie in them).
     #[arg(long, default_value_t = 200)]
     pub frames: usize,
-    /// Conditions, comma-separated (C0,C1,C2,C3,C4,C5,C5x2,C6,C6x2; default all).
+    /// Conditions, comma-separated (see below; default the nine of the single-frame protocol).
     #[arg(long, value_delimiter = ',')]
     pub conditions: Vec<String>,
+    /// More paired differences to report, A-B by condition name, comma-separated.
+    #[arg(long, value_delimiter = ',')]
+    pub compare: Vec<String>,
     /// Training seeds per condition.
     #[arg(long, default_value_t = 3)]
     pub seeds: u64,
@@ -53,31 +70,45 @@ pub struct EvalBoostArgs {
     /// set, not only the network's seed. Seed 0 keeps the protocol's draw.
     #[arg(long)]
     pub redraw: bool,
-    /// Training pairs per condition (2000 for the full protocol, 500 for a quick one).
+    /// Training pairs of a condition without a real base; at most this many real base pairs.
     #[arg(long, default_value_t = 2000)]
     pub pairs: usize,
-    /// Descriptor training steps per unit (4 pairs x 64 points each).
+    /// Descriptor training steps per unit (4 pairs x 64 points each), unless --epochs.
     #[arg(long, default_value_t = 800)]
     pub steps: u64,
+    #[command(flatten)]
+    pub training: DescriptorTrainingArgs,
     /// The descriptor every unit trains (the patch network by default).
     #[command(flatten)]
     pub model: DescriptorModelArgs,
     /// Points sampled from each evaluation cloud, comma-separated.
     #[arg(long, value_delimiter = ',', default_value = "5000,1000,250")]
     pub samples: Vec<usize>,
-    /// Only these benchmarks of the folder (comma-separated names).
+    /// Only these benchmarks of the folders (comma-separated names).
     #[arg(long, value_delimiter = ',')]
     pub only: Vec<String>,
-    /// Real pairs: a source frame every this many frames.
+    /// Real single-frame pairs: a source frame every this many frames.
     #[arg(long, default_value_t = 2)]
     pub real_every: usize,
-    /// Real pairs: gaps in frames between the two frames, comma-separated.
+    /// Real single-frame pairs: gaps in frames between the two frames, comma-separated.
     #[arg(long, value_delimiter = ',', default_value = "5,10,15,20,25,30,40,50,60,70,80,90,100,120,140")]
     pub real_gaps: Vec<usize>,
+    /// Real fragment pairs: frames fused into one fragment.
+    #[arg(long, default_value_t = 50)]
+    pub fragment_frames: usize,
+    /// Real fragment pairs: frames between the first frames of consecutive fragments.
+    #[arg(long, default_value_t = 10)]
+    pub fragment_stride: usize,
+    /// Source frames of the generated pairs: every training frame, or the first frame of each fragment.
+    #[arg(long, value_enum, default_value = "every-frame")]
+    pub source_frames: SourceFramesArg,
+    /// The generator whose source-side overlap histogram the real single-frame pairs are matched to.
+    #[arg(long, default_value = "classical")]
+    pub reference: String,
     /// The classical generator's pipeline config (its source and frame selection are replaced).
     #[arg(long, default_value = "pipelines/paper-3dmatch-classical.toml")]
     pub classical_config: PathBuf,
-    /// Folder holding correction-tiny.safetensors and diffusion-tiny-holes.safetensors (C4, C6).
+    /// Folder holding correction-tiny.safetensors and diffusion-tiny-holes.safetensors (neural).
     #[arg(long, default_value = "models")]
     pub models: PathBuf,
     /// Seed of the evaluation's point sampling and RANSAC (the same for every condition).
@@ -94,6 +125,13 @@ pub struct EvalBoostArgs {
     pub torch_threads: i32,
 }
 
+/// `--source-frames`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum SourceFramesArg {
+    EveryFrame,
+    FragmentStarts,
+}
+
 pub fn run(a: &EvalBoostArgs, out: &mut dyn Write) -> Result<()> {
     let w = |e: std::io::Error| Error::io("<stdout>", e);
     if a.samples.is_empty() || a.samples.contains(&0) {
@@ -102,11 +140,22 @@ pub fn run(a: &EvalBoostArgs, out: &mut dyn Write) -> Result<()> {
     if a.real_every == 0 || a.real_gaps.is_empty() || a.real_gaps.contains(&0) {
         return Err(Error::config("--real-every/--real-gaps", "must be positive"));
     }
+    if a.fragment_frames == 0 || a.fragment_stride == 0 {
+        return Err(Error::config("--fragment-frames/--fragment-stride", "must be positive"));
+    }
+    let reference = match Condition::parse(&a.reference)?.parts.as_slice() {
+        [p] => match p.source {
+            Source::Generated(g) => g,
+            Source::Real(_) => return Err(Error::config("--reference", "must be a generator (classical, nofill, reproj, neural, ...)")),
+        },
+        _ => return Err(Error::config("--reference", "must be one generator")),
+    };
     crate::nn::set_torch_threads(a.torch_threads)?;
     let mut train = DescriptorTrainOptions::new(a.out.clone());
     train.steps = a.steps;
+    a.training.apply(&mut train);
     train.model = a.model.model()?;
-    train.checkpoint_every = (a.steps / 4).clamp(1, 100);
+    train.checkpoint_every = if a.training.epochs.is_some() { 100 } else { (a.steps / 4).clamp(1, 100) };
     train.validate()?;
     let cfg = BoostConfig {
         sequence: a.sequence.clone(),
@@ -114,9 +163,17 @@ pub fn run(a: &EvalBoostArgs, out: &mut dyn Write) -> Result<()> {
         frames: a.frames,
         real_every: a.real_every,
         real_gaps: a.real_gaps.clone(),
+        fragment_frames: a.fragment_frames,
+        fragment_stride: a.fragment_stride,
+        source_frames: match a.source_frames {
+            SourceFramesArg::EveryFrame => SourceFrames::EveryFrame,
+            SourceFramesArg::FragmentStarts => SourceFrames::FragmentStarts { per: a.fragment_frames, stride: a.fragment_stride },
+        },
+        reference,
         bench: a.bench.clone(),
         only: a.only.clone(),
         conditions: parse_list(&a.conditions)?,
+        compare: parse_comparisons(&a.compare)?,
         seeds: a.seeds,
         redraw: a.redraw,
         pairs: a.pairs,

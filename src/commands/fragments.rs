@@ -4,7 +4,7 @@
 use crate::error::{Error, Result};
 use crate::ply;
 use crate::registration::benchmark::make::{
-    fuse_fragment, pair_truths, single_frame_cloud, write_benchmark, Cloud, LO_MATCH_MAX, SINGLE_FRAME_MAX_OVERLAP,
+    fragments_within, fuse_fragment, pair_truths, single_frame_cloud, write_benchmark, Cloud, LO_MATCH_MAX, SINGLE_FRAME_MAX_OVERLAP,
 };
 use crate::runtime::progress::bar;
 use crate::sources::{open_sequences, Layout};
@@ -17,7 +17,9 @@ use std::path::PathBuf;
 #[derive(Debug, clap::Args)]
 #[command(
     after_help = "Fragments (default): fragment k fuses frames PER*k .. PER*k+PER-1 (TSDF, 6 mm voxels, 3 cm truncation, the \
-3DMatch settings) in the camera of frame PER*k and is written as <out>/<scene>/cloud_bin_k.ply. Every pair i < j whose overlap \
+3DMatch settings) in the camera of frame PER*k and is written as <out>/<scene>/cloud_bin_k.ply. With --stride S below PER the \
+windows overlap: fragment k fuses frames S*k .. S*k+PER-1, so a few frames give many fused pairs (e.g. 200 frames, PER 50, S 10: \
+16 fragments). Every pair i < j whose overlap \
 (the larger of the two clouds' fractions of points with a neighbour within 3.75 cm under the ground truth, on 2.5 cm voxels) is \
 above 30 % goes to metadata/benchmarks/3DMatch/<scene>/, from 10 to 30 % to 3DLoMatch/: gt.log (`i j n` and the 4x4 mapping \
 fragment j into fragment i), gt.info (the 6x6 information matrix of j's overlapping points) and gt_overlap.log.\n\n\
@@ -35,7 +37,11 @@ pub struct FragmentsArgs {
     /// Frames fused into one fragment (3DMatch: 50).
     #[arg(long, default_value_t = 50)]
     pub frames_per_fragment: usize,
-    /// First frame used (fragments: a multiple of --frames-per-fragment, so fragment numbers stay the official ones).
+    /// Frames between the first frames of consecutive fragments (default: --frames-per-fragment, the
+    /// official non-overlapping fragments; smaller: overlapping windows).
+    #[arg(long)]
+    pub stride: Option<usize>,
+    /// First frame used (fragments: a multiple of the stride, so fragment numbers stay the official ones).
     #[arg(long, default_value_t = 0)]
     pub first: usize,
     /// Frames used from --first on (0: to the end of the sequence).
@@ -60,16 +66,14 @@ pub struct FragmentsArgs {
 
 pub fn run(args: &FragmentsArgs, out: &mut dyn Write) -> Result<()> {
     let per = args.frames_per_fragment;
-    if per == 0 || args.every == 0 || args.gaps.iter().any(|&g| g == 0) {
-        return Err(Error::config("--frames-per-fragment/--every/--gaps", "must be at least 1"));
+    let stride = args.stride.unwrap_or(per);
+    if per == 0 || stride == 0 || args.every == 0 || args.gaps.iter().any(|&g| g == 0) {
+        return Err(Error::config("--frames-per-fragment/--stride/--every/--gaps", "must be at least 1"));
     }
-    if !args.single_frames && args.first % per != 0 {
+    if !args.single_frames && args.first % stride != 0 {
         return Err(Error::config(
             "--first",
-            format!(
-                "{} is not a multiple of --frames-per-fragment {per}: fragment numbers would not be the official ones",
-                args.first
-            ),
+            format!("{} is not a multiple of the fragment stride {stride}: fragment numbers would not be the official ones", args.first),
         ));
     }
     for seq in open_sequences(&args.sequence, args.layout)? {
@@ -99,7 +103,7 @@ pub fn run(args: &FragmentsArgs, out: &mut dyn Write) -> Result<()> {
             pb.finish_and_clear();
             (format!("{}-frames", seq.name), clouds, seq.frames.len(), ["single-frame", "single-frame-lo"])
         } else {
-            let ks: Vec<usize> = (args.first / per..end / per).collect();
+            let ks: Vec<usize> = fragments_within(args.first, end, per, stride).collect();
             if ks.is_empty() {
                 return Err(Error::config(
                     "--frames",
@@ -110,11 +114,11 @@ pub fn run(args: &FragmentsArgs, out: &mut dyn Write) -> Result<()> {
             let pb = bar(ks.len() as u64, !args.quiet, "fragments");
             let mut clouds = Vec::new();
             for k in ks {
-                clouds.push(fuse_fragment(&seq, k, per, &tsdf, 1.0)?);
+                clouds.push(fuse_fragment(&seq, k, per, stride, &tsdf, 1.0)?);
                 pb.inc(1);
             }
             pb.finish_and_clear();
-            (seq.name.clone(), clouds, seq.frames.len() / per, ["3DMatch", "3DLoMatch"])
+            (seq.name.clone(), clouds, fragments_within(0, seq.frames.len(), per, stride).len(), ["3DMatch", "3DLoMatch"])
         };
         write_scene(args, &scene, &clouds, n, names, out)?;
     }

@@ -5,7 +5,8 @@ use crate::error::{Error, Result};
 use crate::nn::patch_net::PatchNetConfig;
 use crate::registration::learned::DescriptorModel;
 use crate::registration::patch::PatchConfig;
-use crate::training::descriptor::data::load_pairs;
+use crate::training::descriptor::augment::Augment;
+use crate::training::descriptor::data::{limit_generated, load_pairs};
 use crate::training::descriptor::train::{train_descriptor, DescriptorTrainOptions, LATEST, LOSS_LOG};
 use std::io::Write;
 use std::path::PathBuf;
@@ -26,9 +27,15 @@ pub struct TrainDescriptorArgs {
     /// training frames; clouds voxelised at 2.5 cm). Repeat to combine.
     #[arg(long, required = true)]
     pub data: Vec<PathBuf>,
-    /// Optimiser steps in total (a resumed run continues up to this count).
+    /// Optimiser steps in total (a resumed run continues up to this count); --epochs sets it from the data.
     #[arg(long, default_value_t = 1500)]
     pub steps: u64,
+    #[command(flatten)]
+    pub training: DescriptorTrainingArgs,
+    /// With both real pairs (benchmark folders) and generated ones (pair datasets) in --data: use at most
+    /// this many generated pairs per real pair (a seeded subset; e.g. 8 for the paper's 8:1 mix).
+    #[arg(long)]
+    pub generated_ratio: Option<f64>,
     /// Pairs per step.
     #[arg(long, default_value_t = 4)]
     pub pairs_per_step: usize,
@@ -58,6 +65,42 @@ pub struct TrainDescriptorArgs {
     /// libtorch intra-op threads (see `train correction --help`).
     #[arg(long, default_value_t = 1)]
     pub torch_threads: i32,
+}
+
+/// How the descriptor trains on its pairs (shared with `eval boost`): exposure, the known-point rules of
+/// generated pairs, augmentation.
+#[derive(Debug, Clone, clap::Args)]
+pub struct DescriptorTrainingArgs {
+    /// Train by exposure: each training pair is drawn this many times on average (the step count follows
+    /// the number of pairs, so a larger mix does not show each real pair less often). Overrides --steps.
+    #[arg(long)]
+    pub epochs: Option<f64>,
+    /// Positives only on target points of generated pairs that were re-projected from the source
+    /// (target_known_share >= 0.5), never on filled ones. Real pairs are unaffected.
+    #[arg(long)]
+    pub known_positives: bool,
+    /// Drop the filled target points of generated pairs (target_known_share < 0.5) before training, so
+    /// they enter no local frame, patch or feature.
+    #[arg(long)]
+    pub drop_filled: bool,
+    /// Gaussian noise added to both clouds' points each time a pair is drawn, sigma in metres (0: none;
+    /// GeoTransformer's 3DMatch loader uses 0.005).
+    #[arg(long, default_value_t = 0.0)]
+    pub noise: f32,
+    /// Random rotation of each cloud each time a pair is drawn, up to this many degrees about a random axis
+    /// (0: none; 180: any rotation).
+    #[arg(long, default_value_t = 0.0)]
+    pub rotation: f64,
+}
+
+impl DescriptorTrainingArgs {
+    /// Sets these options on `opts`.
+    pub fn apply(&self, opts: &mut DescriptorTrainOptions) {
+        opts.epochs = self.epochs;
+        opts.known_positives = self.known_positives;
+        opts.drop_filled = self.drop_filled;
+        opts.augment = Augment { noise_m: self.noise, rotation_deg: self.rotation };
+    }
 }
 
 /// Which descriptor network to train (shared with `eval boost`).
@@ -101,6 +144,7 @@ pub fn run(a: &TrainDescriptorArgs, out: &mut dyn Write) -> Result<()> {
     crate::nn::set_torch_threads(a.torch_threads)?;
     let mut opts = DescriptorTrainOptions::new(a.out.clone());
     opts.steps = a.steps;
+    a.training.apply(&mut opts);
     opts.pairs_per_step = a.pairs_per_step;
     opts.points_per_pair = a.points;
     opts.lr = a.lr;
@@ -110,8 +154,22 @@ pub fn run(a: &TrainDescriptorArgs, out: &mut dyn Write) -> Result<()> {
     opts.resume = a.resume;
     opts.progress = !a.quiet;
     opts.validate()?;
-    let pairs = load_pairs(&a.data)?;
-    writeln!(out, "{} descriptor: {} training pairs, {} steps of {} pairs x {} points", a.model.model, pairs.len(), opts.steps, opts.pairs_per_step, opts.points_per_pair).map_err(w)?;
+    let mut pairs = load_pairs(&a.data)?;
+    if let Some(ratio) = a.generated_ratio {
+        pairs = limit_generated(pairs, ratio, a.seed)?;
+    }
+    let real = pairs.iter().filter(|p| p.real).count();
+    writeln!(
+        out,
+        "{} descriptor: {} training pairs ({real} real, {} generated), {} steps of {} pairs x {} points",
+        a.model.model,
+        pairs.len(),
+        pairs.len() - real,
+        opts.total_steps(pairs.len()),
+        opts.pairs_per_step,
+        opts.points_per_pair
+    )
+    .map_err(w)?;
     writeln!(out, "{:>8} {:>10} {:>9} {:>9}", "step", "loss", "match %", "s").map_err(w)?;
     let mut io_err = None;
     let report = train_descriptor(&pairs, &opts, |r| {
@@ -122,6 +180,6 @@ pub fn run(a: &TrainDescriptorArgs, out: &mut dyn Write) -> Result<()> {
     if let Some(e) = io_err {
         return Err(w(e));
     }
-    writeln!(out, "{} parameters; steps {}..={}; checkpoint {}; log {}", report.parameters, report.first_step, opts.steps, a.out.join(LATEST).display(), a.out.join(LOSS_LOG).display()).map_err(w)?;
+    writeln!(out, "{} parameters; steps {}..={}; checkpoint {}; log {}", report.parameters, report.first_step, report.steps, a.out.join(LATEST).display(), a.out.join(LOSS_LOG).display()).map_err(w)?;
     Ok(())
 }

@@ -3,6 +3,10 @@
 //! ```text
 //! <out>/metadata/train.pkl                      list of dicts, pickle protocol 2 (see below)
 //! <out>/data/train/<scene>/cloud_bin_<i>.npy    float32 (N, 3), each cloud in its own camera frame
+//! <out>/data/train/<scene>/cloud_bin_<i>.known_share.npy, .view.npy
+//!                                               the target cloud's per-point provenance: float32 (N,)
+//!                                               and int8 (N,), the `target_known_share` / `target_view`
+//!                                               columns (not written for version-1 datasets)
 //! <out>/metadata/pairs.tsv                      export index → pair key, unit index, pcd0, pcd1
 //! ```
 //!
@@ -12,9 +16,10 @@
 //! `rotation` float64 (3, 3) and `translation` float64 (3,) = `T_target_from_source`, so that
 //! `ref = src @ rotation.T + translation` (GeoTransformer's convention) where the clouds overlap.
 //! `overlap` is `overlap_target`, the fraction of `pcd0`'s points with a neighbour (as the authors'
-//! mixture loader uses the overlap of its `pcd0`).
+//! mixture loader uses the overlap of its `pcd0`). When the dataset has provenance, the dict also has
+//! `pcd0_known_share` and `pcd0_view`, the paths of those two files (GeoTransformer ignores extra keys).
 
-use super::npy::write_npy_points;
+use super::npy::{encode_npy_vector_f32, encode_npy_vector_i8, write_npy, write_npy_points};
 use super::pickle::{dumps, Value};
 use super::rows::sanitize;
 use super::{is_ok, write_text, PairWriter};
@@ -70,7 +75,19 @@ impl PairWriter for GeoTransformerWriter {
         let data = self.out.join("data");
         write_npy_points(&data.join(&pcd0), &row.target_points)?;
         write_npy_points(&data.join(&pcd1), &row.source_points)?;
-        self.entries.push(entry(index, row, &pcd0, &pcd1));
+        let mut e = entry(index, row, &pcd0, &pcd1);
+        if row.target_known_share.len() == row.target_points.len() && row.target_view.len() == row.target_points.len() {
+            let stem = pcd0.trim_end_matches(".npy");
+            let (known, view) = (format!("{stem}.known_share.npy"), format!("{stem}.view.npy"));
+            write_npy(&data.join(&known), &encode_npy_vector_f32(&row.target_known_share))?;
+            let views: Vec<i8> = row.target_view.iter().map(|&v| v as i8).collect();
+            write_npy(&data.join(&view), &encode_npy_vector_i8(&views))?;
+            if let Value::Dict(items) = &mut e {
+                items.push(("pcd0_known_share".into(), Value::Str(known)));
+                items.push(("pcd0_view".into(), Value::Str(view)));
+            }
+        }
+        self.entries.push(e);
         self.tsv.push_str(&format!("{index}\t{}\t{}\t{pcd0}\t{pcd1}\n", row.pair_key, row.unit_index));
         Ok(())
     }

@@ -33,6 +33,20 @@ pub fn encode_npy_mask(width: usize, height: usize, mask: &[bool]) -> Vec<u8> {
     out
 }
 
+/// The `.npy` bytes of a float32 vector (N,) (`np.save` of a `<f4` array).
+pub fn encode_npy_vector_f32(values: &[f32]) -> Vec<u8> {
+    let mut out = npy_header("<f4", &format!("({},)", values.len()));
+    values.iter().for_each(|v| out.extend_from_slice(&v.to_le_bytes()));
+    out
+}
+
+/// The `.npy` bytes of an int8 vector (N,) (`np.save` of an `|i1` array).
+pub fn encode_npy_vector_i8(values: &[i8]) -> Vec<u8> {
+    let mut out = npy_header("|i1", &format!("({},)", values.len()));
+    out.extend(values.iter().map(|v| *v as u8));
+    out
+}
+
 /// Magic, version 1.0, header length and the header dict padded with spaces and a newline so the data
 /// starts at a multiple of 64 bytes.
 fn npy_header(descr: &str, shape: &str) -> Vec<u8> {
@@ -51,10 +65,15 @@ fn npy_header(descr: &str, shape: &str) -> Vec<u8> {
 
 /// Writes [`encode_npy_points`] to `path`, creating parent folders.
 pub fn write_npy_points(path: &Path, points: &[Point]) -> Result<()> {
+    write_npy(path, &encode_npy_points(points))
+}
+
+/// Writes `.npy` bytes to `path`, creating parent folders.
+pub fn write_npy(path: &Path, bytes: &[u8]) -> Result<()> {
     if let Some(parent) = path.parent() {
         std::fs::create_dir_all(parent).map_err(|e| Error::io(parent, e))?;
     }
-    std::fs::write(path, encode_npy_points(points)).map_err(|e| Error::io(path, e))
+    std::fs::write(path, bytes).map_err(|e| Error::io(path, e))
 }
 
 /// Reads back a file written by [`write_npy_points`] (only that exact layout: `<f4`, C order, (N, 3)).

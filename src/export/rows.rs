@@ -4,8 +4,8 @@
 use crate::error::{Error, Result};
 use crate::shards::dataset::{Dataset, PAIRS_TABLE};
 use crate::shards::pairs::batch_to_pairs;
+use crate::shards::pairs_v1::to_current;
 use crate::shards::row::PairRow;
-use crate::shards::schema::pairs_schema_mismatch;
 use super::Filter;
 use indicatif::ProgressBar;
 
@@ -24,9 +24,8 @@ pub fn for_each_row(ds: &Dataset, filter: &Filter, bar: &ProgressBar, mut f: imp
         let path = ds.shard_file(entry);
         let mut rows = Vec::new();
         for batch in ds.read_shard_batches(entry)? {
-            if let Some(m) = pairs_schema_mismatch(&batch.schema()) {
-                return Err(Error::input(&path, format!("not a pairs/1 shard: {m}")));
-            }
+            // The filter is planned on the current schema: a version-1 shard is upgraded first.
+            let batch = to_current(&batch).map_err(|e| Error::input(&path, e.to_string()))?;
             let selected = filter.select(&batch)?;
             rows.extend(batch_to_pairs(&selected).map_err(|e| Error::input(&path, e.to_string()))?);
         }

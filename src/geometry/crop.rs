@@ -30,6 +30,12 @@ impl AxisBox {
     pub fn crop(&self, points: &[Point]) -> Vec<Point> {
         points.iter().filter(|p| self.contains(p)).copied().collect()
     }
+
+    /// The points inside the box with their companions in `with` (one per point), in input order.
+    pub fn crop_with<T: Copy>(&self, points: &[Point], with: &[T]) -> (Vec<Point>, Vec<T>) {
+        assert_eq!(points.len(), with.len(), "one companion per point");
+        points.iter().zip(with).filter(|(p, _)| self.contains(p)).map(|(p, t)| (*p, *t)).unzip()
+    }
 }
 
 #[cfg(test)]

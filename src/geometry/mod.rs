@@ -27,7 +27,7 @@ pub use overlap_estimate::view_overlap;
 pub use pose::{pose_from_rows, pose_to_rows, relative_pose, transform_points};
 pub use pose_sampling::PivotPoseSampler;
 pub use projection::{project_zbuffer, Projection};
-pub use voxel::voxel_downsample;
+pub use voxel::{voxel_downsample, voxel_downsample_tagged, PointTag};
 
 /// A 3D point in metres.
 pub type Point = nalgebra::Point3<f32>;

@@ -197,25 +197,61 @@ fn centroid(sum: [f64; 3], n: u32) -> Point {
 
 /// The same result for clouds too wide to pack: sort point indices by (voxel, index).
 fn downsample_by_sort(points: &[Point], cell: &(dyn Fn(&Point) -> [i64; 3] + Sync)) -> Vec<Point> {
+    let (order, starts) = sorted_voxels(points, cell);
+    starts.windows(2).map(|w| centroid_of(points, &order[w[0]..w[1]])).collect()
+}
+
+/// Point indices sorted by (voxel, index), and where each voxel's run starts (plus the end).
+fn sorted_voxels(points: &[Point], cell: &(dyn Fn(&Point) -> [i64; 3] + Sync)) -> (Vec<u32>, Vec<usize>) {
     let cells: Vec<[i64; 3]> = points.par_iter().map(cell).collect();
     let mut order: Vec<u32> = (0..points.len() as u32).collect();
     order.par_sort_by_key(|&i| (cells[i as usize], i));
-    let mut out = Vec::new();
-    let mut start = 0;
-    while start < order.len() {
-        let c = cells[order[start] as usize];
-        let (mut n, mut sum) = (0u32, [0.0f64; 3]);
-        while start < order.len() && cells[order[start] as usize] == c {
-            let p = &points[order[start] as usize];
-            sum[0] += p.x as f64;
-            sum[1] += p.y as f64;
-            sum[2] += p.z as f64;
-            n += 1;
-            start += 1;
-        }
-        out.push(centroid(sum, n));
+    let mut starts: Vec<usize> = (0..order.len()).filter(|&k| k == 0 || cells[order[k] as usize] != cells[order[k - 1] as usize]).collect();
+    starts.push(order.len());
+    (order, starts)
+}
+
+/// The centroid of the points `run` indexes, summed in the run's order.
+fn centroid_of(points: &[Point], run: &[u32]) -> Point {
+    let mut sum = [0.0f64; 3];
+    for &i in run {
+        let p = &points[i as usize];
+        sum[0] += p.x as f64;
+        sum[1] += p.y as f64;
+        sum[2] += p.z as f64;
     }
-    out
+    centroid(sum, run.len() as u32)
+}
+
+/// Where a point of a generated target came from. For a raw point: `known` is 1 when it was re-projected
+/// from the source frame and 0 when a fill made it, `view` the target view it belongs to (0 = the pair's
+/// first). After [`voxel_downsample_tagged`]: `known` is the share of the voxel's points that were
+/// re-projected, `view` the lowest view among them.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PointTag {
+    pub known: f32,
+    pub view: u8,
+}
+
+/// [`voxel_downsample`] of `points` (the same points, bit for bit, in the same order) with each voxel's
+/// [`PointTag`] summary: the mean of its points' `known`, the minimum of their `view`.
+pub fn voxel_downsample_tagged(points: &[Point], tags: &[PointTag], voxel: f32) -> (Vec<Point>, Vec<PointTag>) {
+    assert!(voxel.is_finite() && voxel > 0.0, "voxel size must be positive, got {voxel}");
+    assert_eq!(points.len(), tags.len(), "one tag per point");
+    let inv = 1.0 / voxel as f64;
+    let cell = |p: &Point| -> [i64; 3] {
+        [(p.x as f64 * inv).floor() as i64, (p.y as f64 * inv).floor() as i64, (p.z as f64 * inv).floor() as i64]
+    };
+    let (order, starts) = sorted_voxels(points, &cell);
+    starts
+        .windows(2)
+        .map(|w| {
+            let run = &order[w[0]..w[1]];
+            let known: f64 = run.iter().map(|&i| tags[i as usize].known as f64).sum();
+            let view = run.iter().map(|&i| tags[i as usize].view).min().expect("a voxel has a point");
+            (centroid_of(points, run), PointTag { known: (known / run.len() as f64) as f32, view })
+        })
+        .unzip()
 }
 
 #[cfg(test)]
@@ -297,5 +333,28 @@ mod tests {
     fn negative_coordinates_floor_towards_minus_infinity() {
         let pts = vec![Point::new(-0.01, 0.0, 0.0), Point::new(0.01, 0.0, 0.0)];
         assert_eq!(voxel_downsample(&pts, 0.025).len(), 2);
+    }
+
+    #[test]
+    fn tagged_downsampling_keeps_the_points_and_summarises_the_tags() {
+        let mut r = Rng::new(17);
+        let pts: Vec<Point> = (0..20_000)
+            .map(|_| Point::new(r.uniform_range(-1.0, 1.0) as f32, r.uniform_range(-1.0, 1.0) as f32, r.uniform_range(0.5, 2.5) as f32))
+            .collect();
+        let tags: Vec<PointTag> = (0..pts.len()).map(|i| PointTag { known: (i % 3 != 0) as u8 as f32, view: (i % 5) as u8 }).collect();
+        let (out, summary) = voxel_downsample_tagged(&pts, &tags, 0.1);
+        assert_eq!(out, voxel_downsample(&pts, 0.1), "the same points as the untagged downsampling");
+        // Independent summary: a BTreeMap keyed by voxel index, in the same (lexicographic) order.
+        let mut m: BTreeMap<(i64, i64, i64), (f64, f64, u8)> = BTreeMap::new();
+        for (p, t) in pts.iter().zip(&tags) {
+            let k = ((p.x as f64 / 0.1f32 as f64).floor() as i64, (p.y as f64 / 0.1f32 as f64).floor() as i64, (p.z as f64 / 0.1f32 as f64).floor() as i64);
+            let e = m.entry(k).or_insert((0.0, 0.0, u8::MAX));
+            e.0 += t.known as f64;
+            e.1 += 1.0;
+            e.2 = e.2.min(t.view);
+        }
+        let expected: Vec<PointTag> = m.values().map(|e| PointTag { known: (e.0 / e.1) as f32, view: e.2 }).collect();
+        assert_eq!(summary, expected);
+        assert!(summary.iter().any(|t| t.known > 0.0 && t.known < 1.0), "some voxels mix known and filled points");
     }
 }

@@ -27,6 +27,36 @@ pub fn write_points(path: &Path, points: &[Point]) -> Result<()> {
     write_bytes(path, &encode_points(points))
 }
 
+/// A target cloud with its per-point provenance: [`encode_points`] plus two vertex properties,
+/// `property float known_share` and `property uchar view` (the `target_known_share` and `target_view`
+/// columns). Without provenance (empty lists: a version-1 dataset), the plain cloud.
+pub fn encode_points_with_provenance(points: &[Point], known_share: &[f32], view: &[u8]) -> Vec<u8> {
+    if known_share.len() != points.len() || view.len() != points.len() {
+        return encode_points(points);
+    }
+    let header = format!(
+        "ply\nformat binary_little_endian 1.0\ncomment written by pointreggpt\n\
+         comment known_share: share of the voxel's points re-projected from the source frame; view: first target view\n\
+         element vertex {}\nproperty float x\nproperty float y\nproperty float z\n\
+         property float known_share\nproperty uchar view\nend_header\n",
+        points.len()
+    );
+    let mut out = Vec::with_capacity(header.len() + 17 * points.len());
+    out.extend_from_slice(header.as_bytes());
+    for ((p, k), v) in points.iter().zip(known_share).zip(view) {
+        for c in [p.x, p.y, p.z, *k] {
+            out.extend_from_slice(&c.to_le_bytes());
+        }
+        out.push(*v);
+    }
+    out
+}
+
+/// Writes [`encode_points_with_provenance`] to `path`, creating parent folders.
+pub fn write_points_with_provenance(path: &Path, points: &[Point], known_share: &[f32], view: &[u8]) -> Result<()> {
+    write_bytes(path, &encode_points_with_provenance(points, known_share, view))
+}
+
 /// A triangle mesh (vertex positions, triangles as vertex indices) as a binary little-endian PLY:
 /// `element vertex` with float `x y z`, then `element face` with `property list uchar int vertex_indices`.
 pub fn encode_mesh(vertices: &[Point], triangles: &[[u32; 3]]) -> Vec<u8> {

@@ -8,7 +8,7 @@ use crate::error::{Error, Result};
 use crate::shards::dataset::{Dataset, SHARDS_DIR};
 use crate::shards::store::QueryTarget;
 use crate::shards::labels::{labels_schema, LABELS_TABLE};
-use crate::shards::{pairs_schema, ManifestEntry, PAIRS_TABLE};
+use crate::shards::{pairs_schema, pairs_schema_of, ManifestEntry, PAIRS_TABLE};
 use datafusion::arrow::array::{ArrayRef, RecordBatch, StringArray, UInt64Array};
 use datafusion::arrow::datatypes::{DataType, Field, Schema, SchemaRef};
 use datafusion::datasource::file_format::parquet::ParquetFormat;
@@ -50,7 +50,9 @@ pub fn run_query_on(ds: &Dataset, sql: &str) -> Result<Vec<RecordBatch>> {
         if let Some((url, store)) = pair_files.iter().chain(&label_files).find_map(|t| t.store.clone()) {
             ctx.register_object_store(&url, store);
         }
-        register_table(&ctx, PAIRS_TABLE, pairs_schema(), &pair_files)?;
+        // A version-1 dataset is queried with its own (unsigned, provenance-free) schema.
+        let schema = pairs_schema_of(&ds.header().schema_version).unwrap_or_else(pairs_schema);
+        register_table(&ctx, PAIRS_TABLE, schema, &pair_files)?;
         register_table(&ctx, LABELS_TABLE, labels_schema(), &label_files)?;
         ctx.register_table("manifest", Arc::new(manifest_table(&entries)?)).map_err(df_err)?;
         let df = ctx.sql(sql).await.map_err(df_err)?;

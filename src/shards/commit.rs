@@ -59,13 +59,18 @@ impl Dataset {
         self.store.commit(draft, batch)
     }
 
-    /// Commits `rows` as shard `shard` of the `pairs` table (see [`Dataset::commit_shard`]).
+    /// Commits `rows` as shard `shard` of the `pairs` table (see [`Dataset::commit_shard`]), in the
+    /// dataset's schema version.
     pub fn commit_pairs(&self, shard: u64, first_unit: u64, units: u64, rows: &[PairRow]) -> Result<ManifestEntry> {
         let mut by_status = BTreeMap::new();
         for r in rows {
             *by_status.entry(r.status.as_str().to_string()).or_insert(0) += 1;
         }
-        self.commit_shard(PAIRS_TABLE, shard, first_unit, units, &pairs_to_batch(rows)?, by_status)
+        let mut batch = pairs_to_batch(rows)?;
+        if self.header.schema_version == super::schema::SCHEMA_VERSION_1 {
+            batch = super::pairs_v1::downgrade(&batch)?; // a resumed version-1 dataset stays version 1
+        }
+        self.commit_shard(PAIRS_TABLE, shard, first_unit, units, &batch, by_status)
     }
 
     /// Withdraws the manifest entry of a shard (the shard then no longer exists for readers and a resume

@@ -6,7 +6,7 @@
 
 use super::config_diff::config_differences;
 use super::manifest::{shard_stem, utc_now};
-use super::schema::SCHEMA_VERSION;
+use super::schema::{pairs_schema_of, SCHEMA_VERSION};
 use super::CODE_VERSION;
 pub use super::store::{DATASET_FILE, MANIFEST_DIR, SHARDS_DIR, TMP_DIR};
 use super::store::{open_store, DatasetStore};
@@ -22,7 +22,7 @@ pub const PAIRS_TABLE: &str = "pairs";
 pub struct DatasetHeader {
     /// blake3 of the resolved pipeline config, hex: every shard of the dataset was built with it.
     pub config_hash: String,
-    /// Schema version of the pairs table (`pairs/1`).
+    /// Schema version of the pairs table (`pairs/2`; `pairs/1` for datasets built before it).
     pub schema_version: String,
     /// Code version that created the dataset (each shard records its own in the manifest).
     pub code_version: String,
@@ -180,16 +180,19 @@ fn read_dataset_file(store: &dyn DatasetStore) -> Result<(DatasetHeader, toml::T
     Ok((header, table))
 }
 
+/// Accepts the pairs schema versions this code reads and writes (a resumed version-1 dataset gets
+/// version-1 shards).
 fn check_schema_version(store: &dyn DatasetStore, header: &DatasetHeader) -> Result<()> {
-    if header.schema_version == SCHEMA_VERSION {
+    if pairs_schema_of(&header.schema_version).is_some() {
         return Ok(());
     }
     Err(Error::input(
         store.locate(DATASET_FILE),
         format!(
-            "the dataset's schema is {}, this {CODE_VERSION} reads and writes {SCHEMA_VERSION}: use a matching \
-             pointreggpt, or build into a new output folder",
-            header.schema_version
+            "the dataset's schema is {}, this {CODE_VERSION} reads and writes {} and {SCHEMA_VERSION}: use a \
+             matching pointreggpt, or build into a new output folder",
+            header.schema_version,
+            super::schema::SCHEMA_VERSION_1
         ),
     ))
 }

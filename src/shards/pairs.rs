@@ -1,24 +1,29 @@
-//! [`PairRow`]s ↔ an Arrow [`RecordBatch`] of the pairs v1 schema, an exact round trip.
+//! [`PairRow`]s ↔ an Arrow [`RecordBatch`] of the pairs v2 schema, an exact round trip. Version-1
+//! batches are read too (through [`super::pairs_v1::to_current`]).
+//!
+//! Unsigned row fields are stored in signed columns bit for bit (`seed as i64`); reading casts back.
 
+use super::pairs_v1::to_current;
 use super::row::{PairRow, StageTiming, Status};
-use super::schema::{list_item, pairs_schema, pairs_schema_mismatch, timing_fields, type_notation};
+use super::schema::{list_item, pairs_schema, timing_fields, type_notation};
 use crate::error::{Error, Result};
 use crate::geometry::Point;
 use arrow::array::{
-    Array, ArrayRef, BinaryArray, FixedSizeListArray, Float32Array, Float64Array, ListArray, RecordBatch, StringArray,
-    StructArray, UInt32Array, UInt64Array,
+    Array, ArrayRef, BinaryArray, FixedSizeListArray, Float32Array, Float64Array, Int32Array, Int64Array, Int8Array,
+    ListArray, RecordBatch, StringArray, StructArray,
 };
 use arrow::buffer::OffsetBuffer;
 use std::sync::Arc;
 
-/// Builds one batch (pairs v1 schema) holding `rows` in order.
+/// Builds one batch (pairs v2 schema) holding `rows` in order.
 pub fn pairs_to_batch(rows: &[PairRow]) -> Result<RecordBatch> {
     let schema = pairs_schema();
     let ty = |name: &str| schema.field_with_name(name).expect("pairs schema column").data_type().clone();
     let utf8 = |f: fn(&PairRow) -> &str| -> ArrayRef { Arc::new(StringArray::from_iter_values(rows.iter().map(f))) };
     let binary = |f: fn(&PairRow) -> &[u8]| -> ArrayRef { Arc::new(BinaryArray::from_iter_values(rows.iter().map(f))) };
-    let u32s = |f: fn(&PairRow) -> u32| -> ArrayRef { Arc::new(UInt32Array::from_iter_values(rows.iter().map(f))) };
-    let u64s = |f: fn(&PairRow) -> u64| -> ArrayRef { Arc::new(UInt64Array::from_iter_values(rows.iter().map(f))) };
+    // Bit for bit: a u32 / u64 field in an int32 / int64 column.
+    let u32s = |f: fn(&PairRow) -> u32| -> ArrayRef { Arc::new(Int32Array::from_iter_values(rows.iter().map(|r| f(r) as i32))) };
+    let u64s = |f: fn(&PairRow) -> u64| -> ArrayRef { Arc::new(Int64Array::from_iter_values(rows.iter().map(|r| f(r) as i64))) };
     let f64s = |f: fn(&PairRow) -> f64| -> ArrayRef { Arc::new(Float64Array::from_iter_values(rows.iter().map(f))) };
     let vectors = |name: &str, f: fn(&PairRow) -> &[f64]| -> Result<ArrayRef> {
         let t = ty(name);
@@ -40,6 +45,20 @@ pub fn pairs_to_batch(rows: &[PairRow]) -> Result<RecordBatch> {
         let offsets = offsets(name, rows.iter().map(|r| f(r).len()))?;
         Ok(Arc::new(ListArray::try_new(point_field, offsets, Arc::new(points), None).map_err(arrow_err(name))?))
     };
+    let provenance = |name: &str, values: ArrayRef, lengths: &dyn Fn(&PairRow) -> usize| -> Result<ArrayRef> {
+        let offsets = offsets(name, rows.iter().map(lengths))?;
+        Ok(Arc::new(ListArray::try_new(list_item(&ty(name)), offsets, values, None).map_err(arrow_err(name))?))
+    };
+    let known_share = provenance(
+        "target_known_share",
+        Arc::new(Float32Array::from_iter_values(rows.iter().flat_map(|r| r.target_known_share.iter().copied()))),
+        &|r| r.target_known_share.len(),
+    )?;
+    let view = provenance(
+        "target_view",
+        Arc::new(Int8Array::from_iter_values(rows.iter().flat_map(|r| r.target_view.iter().map(|&v| v as i8)))),
+        &|r| r.target_view.len(),
+    )?;
     let timings = {
         let t = ty("timings");
         let all = || rows.iter().flat_map(|r| r.timings.iter());
@@ -68,6 +87,8 @@ pub fn pairs_to_batch(rows: &[PairRow]) -> Result<RecordBatch> {
         u32s(|r| r.pose_draws),
         clouds("source_points", |r| &r.source_points)?,
         clouds("target_points", |r| &r.target_points)?,
+        known_share,
+        view,
         f64s(|r| r.overlap_source),
         f64s(|r| r.overlap_target),
         binary(|r| &r.source_depth_png),
@@ -82,30 +103,31 @@ pub fn pairs_to_batch(rows: &[PairRow]) -> Result<RecordBatch> {
     RecordBatch::try_new(schema, columns).map_err(|e| Error::Parquet(format!("building a pairs batch: {e}")))
 }
 
-/// Reads every row of a pairs v1 batch. Errors name the column when the batch does not match the schema.
+/// Reads every row of a pairs batch (v2, or v1: its rows get empty provenance lists). Errors name the
+/// column when the batch does not match its version's schema.
 pub fn batch_to_pairs(batch: &RecordBatch) -> Result<Vec<PairRow>> {
-    if let Some(m) = pairs_schema_mismatch(&batch.schema()) {
-        return Err(Error::Parquet(format!("not a pairs/1 batch: {m}")));
-    }
+    let batch = &to_current(batch)?;
     let c = Columns(batch);
-    let unit_index = c.get::<UInt64Array>("unit_index")?;
+    let unit_index = c.get::<Int64Array>("unit_index")?;
     let pair_key = c.get::<StringArray>("pair_key")?;
     let scene = c.get::<StringArray>("scene")?;
     let frame_key = c.get::<StringArray>("frame_key")?;
-    let sample_index = c.get::<UInt32Array>("sample_index")?;
+    let sample_index = c.get::<Int32Array>("sample_index")?;
     let source_path = c.get::<StringArray>("source_path")?;
     let source_hash = c.get::<StringArray>("source_hash")?;
     let status = c.get::<StringArray>("status")?;
     let message = c.get::<StringArray>("message")?;
-    let seed = c.get::<UInt64Array>("seed")?;
-    let width = c.get::<UInt32Array>("width")?;
-    let height = c.get::<UInt32Array>("height")?;
+    let seed = c.get::<Int64Array>("seed")?;
+    let width = c.get::<Int32Array>("width")?;
+    let height = c.get::<Int32Array>("height")?;
     let source_intrinsics = c.vectors::<4>("source_intrinsics")?;
     let target_intrinsics = c.vectors::<4>("target_intrinsics")?;
     let t_target_from_source = c.vectors::<16>("t_target_from_source")?;
-    let pose_draws = c.get::<UInt32Array>("pose_draws")?;
+    let pose_draws = c.get::<Int32Array>("pose_draws")?;
     let source_points = c.clouds("source_points")?;
     let target_points = c.clouds("target_points")?;
+    let known_share = c.lists::<Float32Array>("target_known_share")?;
+    let view = c.lists::<Int8Array>("target_view")?;
     let overlap_source = c.get::<Float64Array>("overlap_source")?;
     let overlap_target = c.get::<Float64Array>("overlap_target")?;
     let source_depth_png = c.get::<BinaryArray>("source_depth_png")?;
@@ -126,24 +148,26 @@ pub fn batch_to_pairs(batch: &RecordBatch) -> Result<Vec<PairRow>> {
                 Error::Parquet(format!("column `status`: row {i} has unknown status {:?}", status.value(i)))
             })?;
             Ok(PairRow {
-                unit_index: unit_index.value(i),
+                unit_index: unit_index.value(i) as u64,
                 pair_key: pair_key.value(i).to_string(),
                 scene: scene.value(i).to_string(),
                 frame_key: frame_key.value(i).to_string(),
-                sample_index: sample_index.value(i),
+                sample_index: sample_index.value(i) as u32,
                 source_path: source_path.value(i).to_string(),
                 source_hash: source_hash.value(i).to_string(),
                 status,
                 message: message.value(i).to_string(),
-                seed: seed.value(i),
-                width: width.value(i),
-                height: height.value(i),
+                seed: seed.value(i) as u64,
+                width: width.value(i) as u32,
+                height: height.value(i) as u32,
                 source_intrinsics: source_intrinsics[i],
                 target_intrinsics: target_intrinsics[i],
                 t_target_from_source: t_target_from_source[i],
-                pose_draws: pose_draws.value(i),
+                pose_draws: pose_draws.value(i) as u32,
                 source_points: source_points.next().expect("one cloud per row"),
                 target_points: target_points.next().expect("one cloud per row"),
+                target_known_share: known_share.0.values()[known_share.1[i]..known_share.1[i + 1]].to_vec(),
+                target_view: view.0.values()[view.1[i]..view.1[i + 1]].iter().map(|&v| v as u8).collect(),
                 overlap_source: overlap_source.value(i),
                 overlap_target: overlap_target.value(i),
                 source_depth_png: source_depth_png.value(i).to_vec(),
@@ -186,6 +210,14 @@ impl Columns<'_> {
         no_nulls(name, values.as_ref())?;
         let values = downcast::<Float64Array>(name, values.as_ref())?.values();
         Ok(values.chunks_exact(N).map(|c| c.try_into().expect("chunk of N")).collect())
+    }
+
+    /// A `list<primitive>` column: its values and the offsets into them (rows + 1 of them).
+    fn lists<T: Array + 'static>(&self, name: &str) -> Result<(&T, Vec<usize>)> {
+        let list = self.get::<ListArray>(name)?;
+        no_nulls(name, list.values().as_ref())?;
+        let values = downcast::<T>(name, list.values().as_ref())?;
+        Ok((values, list.offsets().iter().map(|&o| o as usize).collect()))
     }
 
     fn clouds(&self, name: &str) -> Result<Vec<Vec<Point>>> {
@@ -297,6 +329,8 @@ pub(crate) mod tests {
             pose_draws: k as u32 + 1,
             source_points: if status == Status::InputError { vec![] } else { cloud(10 + 7 * k, 0.01) },
             target_points: if status == Status::InputError { vec![] } else { cloud(3 + 5 * k, -0.02) },
+            target_known_share: if status == Status::InputError { vec![] } else { (0..3 + 5 * k).map(|i| (i % 4) as f32 / 3.0).collect() },
+            target_view: if status == Status::InputError { vec![] } else { (0..3 + 5 * k).map(|i| (i % 3) as u8).collect() },
             overlap_source: 0.1 + 0.3 * (k % 3) as f64,
             overlap_target: 1.0 / (1.0 + k as f64),
             source_depth_png: vec![k as u8; k * 3],
@@ -342,6 +376,7 @@ pub(crate) mod tests {
         let batch = pairs_to_batch(&[sample_row(1)]).unwrap();
         // A batch without the `seed` column.
         let keep: Vec<usize> = (0..batch.num_columns()).filter(|&i| i != 9).collect();
+        let batch = &batch; // the same batch for the cases below
         let err = batch_to_pairs(&batch.project(&keep).unwrap()).unwrap_err().to_string();
         assert!(err.contains("seed"), "{err}");
         // An unknown status value.
@@ -352,11 +387,22 @@ pub(crate) mod tests {
         assert!(err.contains("status") && err.contains("maybe"), "{err}");
         // A column of the wrong type.
         let mut fields: Vec<Field> = batch.schema().fields().iter().map(|f| f.as_ref().clone()).collect();
-        fields[0] = Field::new("unit_index", DataType::Int64, false);
+        fields[0] = Field::new("unit_index", DataType::UInt64, false);
         let mut columns = batch.columns().to_vec();
-        columns[0] = Arc::new(arrow::array::Int64Array::from(vec![1]));
-        let bad = RecordBatch::try_new(Arc::new(Schema::new(fields)), columns).unwrap();
+        columns[0] = Arc::new(arrow::array::UInt64Array::from(vec![1]));
+        let bad = RecordBatch::try_new(Arc::new(Schema::new_with_metadata(fields, batch.schema().metadata().clone())), columns).unwrap();
         let err = batch_to_pairs(&bad).unwrap_err().to_string();
-        assert!(err.contains("unit_index") && err.contains("int64"), "{err}");
+        assert!(err.contains("unit_index") && err.contains("uint64"), "{err}");
+    }
+
+    #[test]
+    fn seeds_are_stored_bit_for_bit_in_signed_columns() {
+        let mut row = sample_row(0);
+        row.seed = u64::MAX - 5; // above i64::MAX
+        row.unit_index = 7;
+        let batch = pairs_to_batch(std::slice::from_ref(&row)).unwrap();
+        let seed = batch.column_by_name("seed").unwrap().as_any().downcast_ref::<Int64Array>().unwrap().value(0);
+        assert_eq!(seed, -6, "u64::MAX - 5 as two's complement");
+        assert_eq!(batch_to_pairs(&batch).unwrap()[0].seed, u64::MAX - 5);
     }
 }

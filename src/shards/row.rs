@@ -41,7 +41,7 @@ pub struct StageTiming {
     pub ms: f64,
 }
 
-/// One row of the `pairs` table (schema v1, `schemas/pairs-v1.md`).
+/// One row of the `pairs` table (schema v2, `schemas/pairs-v2.md`).
 ///
 /// Clouds are each in their own camera frame; `t_target_from_source` maps source-camera points into the
 /// target camera (`p_t = R·p_s + t`), row-major 4×4.
@@ -77,6 +77,12 @@ pub struct PairRow {
     /// Voxelized clouds, each in its own camera frame, metres.
     pub source_points: Vec<Point>,
     pub target_points: Vec<Point>,
+    /// Per target point: the share of its voxel's points re-projected from the source frame (1 = all
+    /// re-projected, 0 = all made by the fill). Empty when unknown (version-1 datasets, input errors).
+    pub target_known_share: Vec<f32>,
+    /// Per target point: the first target view (0 = the pair's first) whose points fall in its voxel; all
+    /// 0 without successive views. Empty when unknown.
+    pub target_view: Vec<u8>,
     /// Fraction of source points with a target neighbour within the radius, and the reverse.
     pub overlap_source: f64,
     pub overlap_target: f64,
@@ -122,6 +128,8 @@ impl Default for PairRow {
             pose_draws: 0,
             source_points: Vec::new(),
             target_points: Vec::new(),
+            target_known_share: Vec::new(),
+            target_view: Vec::new(),
             overlap_source: 0.0,
             overlap_target: 0.0,
             source_depth_png: Vec::new(),
@@ -165,6 +173,8 @@ impl PairRow {
             let bytes: Vec<u8> = cloud.iter().flat_map(|p| [p.x, p.y, p.z]).flat_map(f32::to_le_bytes).collect();
             s(&bytes);
         }
+        s(&self.target_known_share.iter().flat_map(|v| v.to_le_bytes()).collect::<Vec<u8>>());
+        s(&self.target_view);
         s(&self.overlap_source.to_le_bytes());
         s(&self.overlap_target.to_le_bytes());
         s(&self.source_depth_png);

@@ -1,15 +1,23 @@
-//! The Arrow schema of the `pairs` table, version 1 (`schemas/pairs-v1.md` is its human-readable twin).
+//! The Arrow schema of the `pairs` table, version 2 (`schemas/pairs-v2.md` is its human-readable twin),
+//! and version 1, which datasets built before it still hold (`schemas/pairs-v1.md`; read and resumed
+//! through [`super::pairs_v1`]).
 //!
 //! One column per [`PairRow`](super::row::PairRow) field, in the same order. No column is nullable: a
-//! value that is "not stored" is an empty list or an empty binary. The schema's metadata carries
-//! `schema_version = "pairs/1"`, which every Parquet shard embeds.
+//! value that is "not stored" is an empty list or an empty binary. Version 2 has only signed integers
+//! (data-lake engines such as Delta, Spark and Trino have no unsigned ones; the 64-bit seed is stored bit
+//! for bit as `int64`) and the per-point provenance of the target cloud. The schema's metadata carries
+//! `schema_version`, which every Parquet shard embeds.
 
 use arrow::datatypes::{DataType, Field, FieldRef, Fields, Schema, SchemaRef};
 use std::collections::HashMap;
 use std::sync::{Arc, OnceLock};
 
-/// The version of the pairs schema, stored in the Arrow schema metadata under [`SCHEMA_VERSION_KEY`].
-pub const SCHEMA_VERSION: &str = "pairs/1";
+/// The version of the pairs schema this code writes, stored in the Arrow schema metadata under
+/// [`SCHEMA_VERSION_KEY`] and in `dataset.toml`.
+pub const SCHEMA_VERSION: &str = "pairs/2";
+
+/// The first version, still read (and written when a version-1 dataset is resumed).
+pub const SCHEMA_VERSION_1: &str = "pairs/1";
 
 /// The schema-metadata key holding a table's schema version (`"pairs/1"`, `"labels/1"`, ...).
 pub const SCHEMA_VERSION_KEY: &str = "schema_version";
@@ -50,34 +58,62 @@ pub fn list_item(data_type: &DataType) -> FieldRef {
     }
 }
 
-/// The pairs v1 schema (built once, shared).
-pub fn pairs_schema() -> SchemaRef {
-    static SCHEMA: OnceLock<SchemaRef> = OnceLock::new();
-    SCHEMA.get_or_init(build_pairs_schema).clone()
+/// `list<T>` of non-null values.
+pub fn list_of(t: DataType) -> DataType {
+    DataType::List(Arc::new(Field::new(ITEM, t, false)))
 }
 
-fn build_pairs_schema() -> SchemaRef {
-    use DataType::{Binary, Float64, UInt32, UInt64, Utf8};
+/// The pairs v2 schema (built once, shared): what this code writes.
+pub fn pairs_schema() -> SchemaRef {
+    static SCHEMA: OnceLock<SchemaRef> = OnceLock::new();
+    SCHEMA.get_or_init(|| build_pairs_schema(2)).clone()
+}
+
+/// The pairs v1 schema: unsigned integers, no provenance columns.
+pub fn pairs_schema_v1() -> SchemaRef {
+    static SCHEMA: OnceLock<SchemaRef> = OnceLock::new();
+    SCHEMA.get_or_init(|| build_pairs_schema(1)).clone()
+}
+
+/// The pairs schema of a recorded version (`pairs/1`, `pairs/2`), or `None` for a version this code
+/// does not know.
+pub fn pairs_schema_of(version: &str) -> Option<SchemaRef> {
+    match version {
+        SCHEMA_VERSION => Some(pairs_schema()),
+        SCHEMA_VERSION_1 => Some(pairs_schema_v1()),
+        _ => None,
+    }
+}
+
+fn build_pairs_schema(version: u32) -> SchemaRef {
+    use DataType::{Binary, Float32, Float64, Int32, Int64, Int8, UInt32, UInt64, Utf8};
     let col = |name: &str, t: DataType| Field::new(name, t, false);
-    let fields = vec![
-        col("unit_index", UInt64),
+    let (u64t, u32t) = if version == 1 { (UInt64, UInt32) } else { (Int64, Int32) };
+    let mut fields = vec![
+        col("unit_index", u64t.clone()),
         col("pair_key", Utf8),
         col("scene", Utf8),
         col("frame_key", Utf8),
-        col("sample_index", UInt32),
+        col("sample_index", u32t.clone()),
         col("source_path", Utf8),
         col("source_hash", Utf8),
         col("status", Utf8),
         col("message", Utf8),
-        col("seed", UInt64),
-        col("width", UInt32),
-        col("height", UInt32),
+        col("seed", u64t),
+        col("width", u32t.clone()),
+        col("height", u32t.clone()),
         col("source_intrinsics", f64_vector_type(4)),
         col("target_intrinsics", f64_vector_type(4)),
         col("t_target_from_source", f64_vector_type(16)),
-        col("pose_draws", UInt32),
+        col("pose_draws", u32t),
         col("source_points", cloud_type()),
         col("target_points", cloud_type()),
+    ];
+    if version >= 2 {
+        fields.push(col("target_known_share", list_of(Float32)));
+        fields.push(col("target_view", list_of(Int8)));
+    }
+    fields.extend([
         col("overlap_source", Float64),
         col("overlap_target", Float64),
         col("source_depth_png", Binary),
@@ -88,8 +124,9 @@ fn build_pairs_schema() -> SchemaRef {
         col("code_version", Utf8),
         col("stages", Utf8),
         col("timings", timings_type()),
-    ];
-    let metadata = HashMap::from([(SCHEMA_VERSION_KEY.to_string(), SCHEMA_VERSION.to_string())]);
+    ]);
+    let name = if version == 1 { SCHEMA_VERSION_1 } else { SCHEMA_VERSION };
+    let metadata = HashMap::from([(SCHEMA_VERSION_KEY.to_string(), name.to_string())]);
     Arc::new(Schema::new_with_metadata(fields, metadata))
 }
 
@@ -103,6 +140,8 @@ pub fn type_notation(data_type: &DataType) -> String {
         DataType::Int32 => "int32".into(),
         DataType::Int64 => "int64".into(),
         DataType::UInt8 => "uint8".into(),
+        DataType::Int8 => "int8".into(),
+        DataType::Int16 => "int16".into(),
         DataType::UInt16 => "uint16".into(),
         DataType::Float32 => "float32".into(),
         DataType::Float64 => "float64".into(),
@@ -120,10 +159,15 @@ pub fn type_notation(data_type: &DataType) -> String {
     }
 }
 
-/// The first difference between `found` and the pairs schema (by column name), or `None` when the fields
-/// match in names, order, types and nullability. Metadata is not compared.
+/// The first difference between `found` and the pairs schema of its own recorded version (metadata
+/// `schema_version`; a file without one is compared with the current version), or `None` when the fields
+/// match in names, order, types and nullability.
 pub fn pairs_schema_mismatch(found: &Schema) -> Option<String> {
-    fields_mismatch(pairs_schema().fields(), found.fields())
+    let version = found.metadata().get(SCHEMA_VERSION_KEY).map(String::as_str).unwrap_or(SCHEMA_VERSION);
+    match pairs_schema_of(version) {
+        Some(expected) => fields_mismatch(expected.fields(), found.fields()).map(|m| format!("{version}: {m}")),
+        None => Some(format!("unknown pairs schema version {version:?} (this code reads {SCHEMA_VERSION_1} and {SCHEMA_VERSION})")),
+    }
 }
 
 /// The first difference between two field lists, naming the column.
@@ -164,11 +208,28 @@ mod tests {
     #[test]
     fn schema_has_version_and_no_nullable_column() {
         let schema = pairs_schema();
-        assert_eq!(schema.metadata().get(SCHEMA_VERSION_KEY).map(String::as_str), Some("pairs/1"));
-        assert_eq!(schema.fields().len(), 28);
+        assert_eq!(schema.metadata().get(SCHEMA_VERSION_KEY).map(String::as_str), Some("pairs/2"));
+        assert_eq!(schema.fields().len(), 30);
         assert!(schema.fields().iter().all(|f| !f.is_nullable()));
         assert_eq!(schema.field(0).name(), "unit_index");
-        assert_eq!(schema.field(27).name(), "timings");
+        assert_eq!(schema.field(29).name(), "timings");
+        let v1 = pairs_schema_v1();
+        assert_eq!(v1.metadata().get(SCHEMA_VERSION_KEY).map(String::as_str), Some("pairs/1"));
+        assert_eq!(v1.fields().len(), 28);
+    }
+
+    #[test]
+    fn version_2_has_no_unsigned_integer() {
+        fn unsigned(t: &DataType) -> bool {
+            match t {
+                DataType::UInt8 | DataType::UInt16 | DataType::UInt32 | DataType::UInt64 => true,
+                DataType::List(f) | DataType::FixedSizeList(f, _) => unsigned(f.data_type()),
+                DataType::Struct(fs) => fs.iter().any(|f| unsigned(f.data_type())),
+                _ => false,
+            }
+        }
+        assert!(pairs_schema().fields().iter().all(|f| !unsigned(f.data_type())));
+        assert!(pairs_schema_v1().fields().iter().any(|f| unsigned(f.data_type())));
     }
 
     #[test]
@@ -182,13 +243,19 @@ mod tests {
     fn mismatch_names_the_column() {
         let schema = pairs_schema();
         assert_eq!(pairs_schema_mismatch(&schema), None);
+        assert_eq!(pairs_schema_mismatch(&pairs_schema_v1()), None);
+        let i = schema.index_of("overlap_source").unwrap();
         let mut fields: Vec<Field> = schema.fields().iter().map(|f| f.as_ref().clone()).collect();
-        fields[18] = Field::new("overlap_source", DataType::Float32, false);
+        fields[i] = Field::new("overlap_source", DataType::Float32, false);
         let msg = pairs_schema_mismatch(&Schema::new(fields.clone())).unwrap();
         assert!(msg.contains("overlap_source") && msg.contains("float64") && msg.contains("float32"), "{msg}");
-        fields[18] = schema.field(18).clone();
+        fields[i] = schema.field(i).clone();
         fields.pop();
         let msg = pairs_schema_mismatch(&Schema::new(fields)).unwrap();
         assert!(msg.contains("timings"), "{msg}");
+        // A v1 file is compared with the v1 schema: the v2 columns in it are an error.
+        let v1_tagged = Schema::new_with_metadata(schema.fields().clone(), pairs_schema_v1().metadata().clone());
+        let msg = pairs_schema_mismatch(&v1_tagged).unwrap();
+        assert!(msg.contains("pairs/1") && msg.contains("unit_index"), "{msg}");
     }
 }

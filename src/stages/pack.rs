@@ -75,6 +75,8 @@ impl Stage<PairUnit> for Pack {
             pose_draws: u.pose_draws,
             source_points: std::mem::take(&mut u.source_points),
             target_points: std::mem::take(&mut u.target_points),
+            target_known_share: u.target_tags.iter().map(|t| t.known).collect(),
+            target_view: std::mem::take(&mut u.target_tags).iter().map(|t| t.view).collect(),
             overlap_source: u.overlap.source,
             overlap_target: u.overlap.target,
             source_depth_png: png(&u.source_depth)?,

@@ -9,9 +9,11 @@ use super::inpaint::noise_seed;
 use super::{streams, PairUnit};
 use crate::correction::Corrector;
 use crate::error::{Error, Result};
+use super::voxelize::tagged_view_points;
+use crate::geometry::projection::NO_SOURCE;
 use crate::geometry::{
-    backproject, project_zbuffer, transform_points, voxel_downsample, AxisBox, DepthMap, DepthRange, Intrinsics,
-    PivotPoseSampler, Point,
+    project_zbuffer, transform_points, voxel_downsample_tagged, AxisBox, DepthMap, DepthRange, Intrinsics, PivotPoseSampler,
+    Point, PointTag, Projection,
 };
 use crate::inpainting::{InpaintContext, Inpainter};
 use crate::rng::Rng;
@@ -90,39 +92,54 @@ impl Stage<PairUnit> for Successive {
         let k = unit.k.expect("ingest sets the intrinsics");
         let t_first = unit.t_target_from_source;
         let first = unit.target_depth.as_ref().expect("inpaint sets the target");
-        // The fragment (all views, source frame) and the scene memory (source points + views so far). The
-        // unit's own memory stays the source cloud.
-        let mut fragment = self.view_points(first, &k, &t_first);
-        let mut memory = voxel_downsample(&[unit.memory.as_slice(), &fragment].concat(), self.memory_voxel);
+        // The fragment (all views, source frame) and the scene memory (source points + views so far), each
+        // point tagged with its provenance: in the memory, `known` is the share of a point's voxel traced
+        // back to the source frame. The unit's own memory stays the source cloud.
+        let (mut fragment, mut fragment_tags) = self.view_points(first, &k, &t_first, &unit.known, 0);
+        let source_tags = vec![PointTag { known: 1.0, view: 0 }; unit.memory.len()];
+        let (mut memory, mut memory_tags) = voxel_downsample_tagged(
+            &[unit.memory.as_slice(), &fragment].concat(),
+            &[source_tags.as_slice(), &fragment_tags].concat(),
+            self.memory_voxel,
+        );
         for view in 1..self.views {
             let t = self.sampler.sample(&mut Rng::new(unit.seed).fork(streams::POSE).fork(view as u64));
-            let depth = self.generate(&memory, &t, &k, noise_seed(unit.seed, view));
-            let points = self.view_points(&depth, &k, &t);
+            let (depth, known) = self.generate(&memory, &memory_tags, &t, &k, noise_seed(unit.seed, view));
+            let (points, tags) = self.view_points(&depth, &k, &t, &known, view as u8);
             if view + 1 < self.views {
                 // The last view feeds no other: its points only join the fragment.
-                memory = voxel_downsample(&[memory.as_slice(), &points].concat(), self.memory_voxel);
+                (memory, memory_tags) = voxel_downsample_tagged(
+                    &[memory.as_slice(), &points].concat(),
+                    &[memory_tags.as_slice(), &tags].concat(),
+                    self.memory_voxel,
+                );
             }
             fragment.extend(points);
+            fragment_tags.extend(tags);
         }
         // The fused target, in the first view's camera, cropped like a single view's cloud.
-        unit.fused_target = Some(self.crop_box.crop(&transform_points(&fragment, &t_first)));
+        unit.fused_target = Some(self.crop_box.crop_with(&transform_points(&fragment, &t_first), &fragment_tags));
         Ok(())
     }
 }
-
 impl Successive {
     /// One view: re-project the memory into camera `t`, correct the condition, inpaint, correct the output.
-    fn generate(&self, memory: &[Point], t: &Isometry3<f64>, k: &Intrinsics, seed: u64) -> DepthMap {
-        let proj = project_zbuffer(memory, t, k, false);
-        let (mut condition, mut known) = (proj.depth, proj.known);
+    /// Returns the depth and which of its pixels trace back to the source frame (known after the
+    /// correction, and won by a memory point whose voxel is mostly source-traced).
+    fn generate(&self, memory: &[Point], memory_tags: &[PointTag], t: &Isometry3<f64>, k: &Intrinsics, seed: u64) -> (DepthMap, Vec<bool>) {
+        let Projection { depth: mut condition, mut known, source_index } = project_zbuffer(memory, t, k, true);
         correct_condition(self.condition.as_ref(), &mut condition, &mut known);
         let mut depth = self.inpainter.inpaint(&condition, &known, &InpaintContext { intrinsics: *k, seed, t_target_from_source: *t });
         correct_output(self.output.as_ref(), &mut depth);
-        depth
+        let winners = source_index.expect("asked for the source index");
+        let traced = known.iter().zip(&winners).map(|(&kn, &i)| kn && i != NO_SOURCE && memory_tags[i as usize].known >= 0.5).collect();
+        (depth, traced)
     }
 
-    /// A view's points (depth range applied) moved into the source camera frame.
-    fn view_points(&self, depth: &DepthMap, k: &Intrinsics, t_view_from_source: &Isometry3<f64>) -> Vec<Point> {
-        transform_points(&backproject(depth, k, self.depth_range), &t_view_from_source.inverse())
+    /// A view's points (depth range applied) moved into the source camera frame, tagged with `view` and
+    /// whether their pixel is `known`.
+    fn view_points(&self, depth: &DepthMap, k: &Intrinsics, t_view_from_source: &Isometry3<f64>, known: &[bool], view: u8) -> (Vec<Point>, Vec<PointTag>) {
+        let (points, tags) = tagged_view_points(depth, k, self.depth_range, known, view);
+        (transform_points(&points, &t_view_from_source.inverse()), tags)
     }
 }

@@ -1,6 +1,6 @@
 //! The item that flows through the build pipeline: one work unit and everything computed for it.
 
-use crate::geometry::{DepthMap, Intrinsics, Overlap, Point};
+use crate::geometry::{DepthMap, Intrinsics, Overlap, Point, PointTag};
 use crate::runtime::Item;
 use crate::shards::row::{PairRow, StageTiming, Status};
 use nalgebra::Isometry3;
@@ -34,12 +34,14 @@ pub struct PairUnit {
     pub known: Vec<bool>,
     /// Final target depth (inpainted, corrected); with successive views, the first view's.
     pub target_depth: Option<DepthMap>,
-    /// With successive views: all views fused, in the first view's camera frame, cropped to the box (the
-    /// voxelize stage takes it instead of back-projecting `target_depth`).
-    pub fused_target: Option<Vec<Point>>,
+    /// With successive views: all views fused, in the first view's camera frame, cropped to the box, with
+    /// each point's provenance (the voxelize stage takes it instead of back-projecting `target_depth`).
+    pub fused_target: Option<(Vec<Point>, Vec<PointTag>)>,
     /// Voxelized clouds, each in its own camera frame.
     pub source_points: Vec<Point>,
     pub target_points: Vec<Point>,
+    /// Provenance of each voxelized target point (known share, first view).
+    pub target_tags: Vec<PointTag>,
     pub overlap: Overlap,
     pub timings: Vec<StageTiming>,
     /// The finished row, filled by the pack stage.
@@ -71,6 +73,7 @@ impl PairUnit {
             fused_target: None,
             source_points: Vec::new(),
             target_points: Vec::new(),
+            target_tags: Vec::new(),
             overlap: Overlap { source: 0.0, target: 0.0 },
             timings: Vec::new(),
             row: None,

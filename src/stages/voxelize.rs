@@ -4,7 +4,7 @@
 use super::ingest::WorkingConfig;
 use super::PairUnit;
 use crate::error::{Error, Result};
-use crate::geometry::{backproject, voxel_downsample, AxisBox, DepthRange};
+use crate::geometry::{backproject_with_pixels, voxel_downsample, voxel_downsample_tagged, AxisBox, DepthMap, DepthRange, Intrinsics, Point, PointTag};
 use crate::runtime::Stage;
 use crate::shards::row::Status;
 use serde::{Deserialize, Serialize};
@@ -55,13 +55,18 @@ impl Stage<PairUnit> for Voxelize {
     fn process(&mut self, unit: &mut PairUnit) -> Result<()> {
         let k = unit.k.expect("ingest sets the intrinsics");
         let target = unit.target_depth.as_ref().expect("inpaint sets the target");
-        let target_points = match unit.fused_target.take() {
+        let (target_points, tags) = match unit.fused_target.take() {
             Some(fused) => fused,
-            None => self.crop_box.crop(&backproject(target, &k, self.depth_range)),
+            None => {
+                let (points, tags) = tagged_view_points(target, &k, self.depth_range, &unit.known, 0);
+                self.crop_box.crop_with(&points, &tags)
+            }
         };
-        let (s, t) = rayon::join(|| voxel_downsample(&unit.memory, self.voxel), || voxel_downsample(&target_points, self.voxel));
+        let (s, (t, tags)) =
+            rayon::join(|| voxel_downsample(&unit.memory, self.voxel), || voxel_downsample_tagged(&target_points, &tags, self.voxel));
         unit.source_points = s;
         unit.target_points = t;
+        unit.target_tags = tags;
         unit.memory = Vec::new(); // no longer needed: keep items small
         let (ns, nt) = (unit.source_points.len(), unit.target_points.len());
         if ns < self.min_points || nt < self.min_points {
@@ -69,4 +74,12 @@ impl Stage<PairUnit> for Voxelize {
         }
         Ok(())
     }
+}
+
+/// The points of a target view's depth map (in its camera frame, within `range`), each tagged with view
+/// `view` and as re-projected (`known` 1) where `known` marks its pixel, filled (0) elsewhere.
+pub fn tagged_view_points(depth: &DepthMap, k: &Intrinsics, range: DepthRange, known: &[bool], view: u8) -> (Vec<Point>, Vec<PointTag>) {
+    let (points, pixels) = backproject_with_pixels(depth, k, range);
+    let tags = pixels.iter().map(|&p| PointTag { known: known.get(p as usize).copied().unwrap_or(false) as u8 as f32, view }).collect();
+    (points, tags)
 }

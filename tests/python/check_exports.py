@@ -6,7 +6,9 @@ Usage: check_exports.py <dataset> <plan.json>
 plan.json: {"pointreggpt": dir, "geotransformer": dir, "ply": dir,
             "exported": [pair keys the training formats hold, in order], "ply_exported": [pair keys in the ply export]}
 
-Checks: PLY clouds (a small numpy PLY parser), poses and intrinsics (np.loadtxt), gt.log lines (format and
+Checks: PLY clouds (a small numpy PLY parser) and the target clouds' per-point provenance (vertex properties
+`known_share`/`view` in the PLY formats, `.known_share.npy`/`.view.npy` in GeoTransformer's) against the
+`target_known_share`/`target_view` columns, poses and intrinsics (np.loadtxt), gt.log lines (format and
 the official keep rule), the GeoTransformer pickle (pickle.load, numpy arrays, warnings as errors), the .npy
 clouds (np.load), and ground-truth alignment: with the stored transform, the fraction of target points
 with a source point closer than 3.75 cm equals the stored overlap_target (brute force nearest neighbours).
@@ -36,6 +38,12 @@ PLY_TYPES = {"char": "i1", "uchar": "u1", "short": "i2", "ushort": "u2", "int": 
 
 def read_ply(path):
     """The x, y, z of a binary little-endian PLY with scalar vertex properties, as float32 (N, 3)."""
+    v = read_ply_vertices(path)
+    return np.stack([v["x"], v["y"], v["z"]], axis=1).astype(np.float32)
+
+
+def read_ply_vertices(path):
+    """The vertex records of a binary little-endian PLY with scalar vertex properties (a structured array)."""
     with open(path, "rb") as f:
         data = f.read()
     end = data.index(b"end_header\n") + len(b"end_header\n")
@@ -50,19 +58,28 @@ def read_ply(path):
                 count = int(words[2])
         elif words[:1] == ["property"] and in_vertex:
             fields.append((words[2], "<" + PLY_TYPES[words[1]]))
-    vertices = np.frombuffer(data, dtype=np.dtype(fields), count=count, offset=end)
-    return np.stack([vertices["x"], vertices["y"], vertices["z"]], axis=1).astype(np.float32)
+    return np.frombuffer(data, dtype=np.dtype(fields), count=count, offset=end)
+
+
+def check_provenance(vertices, r, key):
+    """The PLY vertex properties known_share and view equal the row's provenance columns."""
+    assert vertices.dtype.names == ("x", "y", "z", "known_share", "view"), f"{key}: target PLY properties {vertices.dtype.names}"
+    assert np.array_equal(vertices["known_share"], r["known_share"]), f"{key}: known_share"
+    assert np.array_equal(vertices["view"].astype(np.int8), r["view"]), f"{key}: view"
 
 
 def load_rows(root):
     rows = {}
     cols = ["pair_key", "unit_index", "scene", "status", "source_points", "target_points", "t_target_from_source",
-            "overlap_source", "overlap_target", "source_intrinsics"]
+            "overlap_source", "overlap_target", "source_intrinsics", "target_known_share", "target_view"]
     for path in committed_shards(root):
         t = pq.read_table(path, columns=cols)
         for i in range(t.num_rows):
-            r = {c: t.column(c)[i].as_py() for c in cols if not c.endswith("_points")}
+            r = {c: t.column(c)[i].as_py() for c in cols if not c.endswith("_points") and not c.startswith("target_")}
             r["source"], r["target"] = points(t.column("source_points"), i), points(t.column("target_points"), i)
+            r["known_share"] = np.asarray(t.column("target_known_share")[i].as_py(), dtype=np.float32)
+            r["view"] = np.asarray(t.column("target_view")[i].as_py(), dtype=np.int8)
+            assert len(r["known_share"]) == len(r["view"]) == len(r["target"]), f"{r['pair_key']}: provenance lengths"
             r["T"] = np.asarray(r["t_target_from_source"], dtype=np.float64).reshape(4, 4)
             rows[r["pair_key"]] = r
     return rows
@@ -119,6 +136,7 @@ def check_pointreggpt(root, rows, keys):
         assert scene == f"scene-{k:06d}" and int(unit) == r["unit_index"] and r["status"] == "ok"
         d = os.path.join(root, "data", scene)
         src, tgt = read_ply(os.path.join(d, "sample-000000.cloud.ply")), read_ply(os.path.join(d, "sample-000001.cloud.ply"))
+        check_provenance(read_ply_vertices(os.path.join(d, "sample-000001.cloud.ply")), r, key)
         assert np.array_equal(src, r["source"]), f"{key}: source cloud differs"
         pose = np.loadtxt(os.path.join(d, "sample-000001.pose.txt"))
         assert pose.shape == (4, 4) and np.abs(pose @ r["T"] - np.eye(4)).max() < 1e-9, f"{key}: pose is not inv(T)"
@@ -146,7 +164,7 @@ def check_geotransformer(root, rows, keys):
         warnings.simplefilter("error")  # e.g. a numpy DeprecationWarning on the array globals
         meta = pickle.loads(raw)
     assert isinstance(meta, list) and len(meta) == len(keys), f"{len(meta)} entries, expected {len(keys)}"
-    want_keys = {"scene_name", "frag_id0", "frag_id1", "overlap", "pcd0", "pcd1", "rotation", "translation"}
+    want_keys = {"scene_name", "frag_id0", "frag_id1", "overlap", "pcd0", "pcd1", "rotation", "translation", "pcd0_known_share", "pcd0_view"}
     exact = 0
     for k, (e, key) in enumerate(zip(meta, keys)):
         r = rows[key]
@@ -160,6 +178,9 @@ def check_geotransformer(root, rows, keys):
         ref, src = (np.load(os.path.join(root, "data", e[p])) for p in ("pcd0", "pcd1"))
         assert ref.dtype == np.float32 and ref.ndim == 2 and ref.shape[1] == 3
         assert np.array_equal(ref, r["target"]) and np.array_equal(src, r["source"]), f"{key}: clouds"
+        known, view = (np.load(os.path.join(root, "data", e[p])) for p in ("pcd0_known_share", "pcd0_view"))
+        assert known.dtype == np.float32 and view.dtype == np.int8, (known.dtype, view.dtype)
+        assert np.array_equal(known, r["known_share"]) and np.array_equal(view, r["view"]), f"{key}: provenance"
         # GeoTransformer's convention ref = src @ R.T + t, computed as the library does: exact overlaps.
         T = np.eye(4)
         T[:3, :3], T[:3, 3] = R, t
@@ -185,6 +206,8 @@ def check_ply(root, rows, keys):
         d = os.path.join(root, folder)
         assert np.array_equal(read_ply(os.path.join(d, "source.ply")), r["source"]), f"{key}: source"
         assert np.array_equal(read_ply(os.path.join(d, "target.ply")), r["target"]), f"{key}: target"
+        if len(r["target"]):
+            check_provenance(read_ply_vertices(os.path.join(d, "target.ply")), r, key)
         assert np.array_equal(np.loadtxt(os.path.join(d, "T_target_from_source.txt")), r["T"]), f"{key}: transform"
     return {"pairs": len(tsv)}
 

@@ -1,5 +1,6 @@
 //! Makes a benchmark from a posed RGB-D sequence: TSDF fragments in the 3DMatch convention (fragment k =
-//! frames `per·k … per·k + per − 1`, points in the camera of its first frame) and single-frame clouds
+//! frames `per·k … per·k + per − 1`, points in the camera of its first frame; with a stride below `per`,
+//! overlapping windows `stride·k … stride·k + per − 1`) and single-frame clouds
 //! made exactly as a build makes them; the pairs between them with their ground truth, information
 //! matrix and overlap, split by overlap into benchmarks.
 
@@ -40,18 +41,26 @@ fn pose_of(seq: &Sequence, f: usize) -> Result<(crate::sources::Frame, Isometry3
     Ok((frame, pose))
 }
 
-/// Fuses fragment `k` (frames `per·k … per·k + per − 1` of `seq`) with `tsdf` and returns its surface
-/// points (weight above `weight_threshold`) in the camera of frame `per·k`.
-pub fn fuse_fragment(seq: &Sequence, k: usize, per: usize, tsdf: &TsdfConfig, weight_threshold: f32) -> Result<Cloud> {
+/// Fuses fragment `k` (frames `stride·k … stride·k + per − 1` of `seq`; the official fragments have
+/// `stride = per`) with `tsdf` and returns its surface points (weight above `weight_threshold`) in the
+/// camera of frame `stride·k`.
+pub fn fuse_fragment(seq: &Sequence, k: usize, per: usize, stride: usize, tsdf: &TsdfConfig, weight_threshold: f32) -> Result<Cloud> {
     let mut volume = TsdfVolume::new(tsdf.clone())?;
     let mut base = None;
-    for f in per * k..per * (k + 1) {
+    for f in stride * k..stride * k + per {
         let (frame, pose) = pose_of(seq, f)?;
         let t_world_from_base = *base.get_or_insert(pose);
         volume.integrate(&frame.depth, &frame.intrinsics, &relative_pose(&t_world_from_base, &pose))?;
     }
     let t_world_from_camera = base.ok_or_else(|| Error::InvalidArgument("empty fragment".into()))?;
     Ok(Cloud { index: k, points: volume.extract_points(weight_threshold), t_world_from_camera })
+}
+
+/// The fragments `k` whose frames `stride·k … stride·k + per − 1` all lie in `first .. end`.
+pub fn fragments_within(first: usize, end: usize, per: usize, stride: usize) -> std::ops::Range<usize> {
+    let lo = first.div_ceil(stride);
+    let hi = if end >= per { (end - per) / stride + 1 } else { 0 };
+    lo..hi.max(lo)
 }
 
 /// Frame `f`'s cloud as a build makes it: the working resolution and intrinsics, back-projection within
@@ -75,6 +84,8 @@ pub fn single_frame_cloud(
 pub struct PairTruth {
     pub gt: GtPair,
     pub overlap: f64,
+    /// The source side alone: the fraction of cloud j's points with a neighbour in cloud i.
+    pub source_overlap: f64,
     pub info: nalgebra::Matrix6<f64>,
 }
 
@@ -111,6 +122,7 @@ pub fn pair_truths(
             Some(PairTruth {
                 gt: GtPair { i: clouds[a].index, j: clouds[b].index, n, t_i_from_j: t },
                 overlap: o,
+                source_overlap: ov.source,
                 info: information_matrix(&overlapping),
             })
         })
@@ -126,4 +138,21 @@ pub fn write_benchmark(root: &Path, name: &str, scene: &str, pairs: &[&PairTruth
         &dir.join("gt_overlap.log"),
         &pairs.iter().map(|p| ((p.gt.i, p.gt.j), p.overlap)).collect::<Vec<_>>(),
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::fragments_within;
+
+    #[test]
+    fn fragments_within_a_frame_range() {
+        // Official: 50-frame fragments of frames 0..200 are 0..4; of 100..400, 2..8.
+        assert_eq!(fragments_within(0, 200, 50, 50), 0..4);
+        assert_eq!(fragments_within(100, 400, 50, 50), 2..8);
+        assert_eq!(fragments_within(0, 199, 50, 50), 0..3);
+        // Stride 10: fragment k starts at 10k and needs frames up to 10k + 49 < end.
+        assert_eq!(fragments_within(0, 200, 50, 10), 0..16);
+        assert_eq!(fragments_within(300, 400, 50, 10), 30..36);
+        assert_eq!(fragments_within(0, 40, 50, 10), 0..0);
+    }
 }

@@ -3,8 +3,9 @@
 //! trains the patch descriptor with several seeds and is scored on the same benchmark with the same
 //! RANSAC seeds; one table with the spread over seeds and paired IR differences with 95 % intervals.
 //!
-//! Files: [`conditions`] (C0–C6 and what each trains on), [`histogram`] (real pairs subsampled to the
-//! generated overlap histogram), [`data`] (the real and generated training pairs), [`scores_file`]
+//! Files: [`conditions`] (the condition grammar, the C0–C6 aliases, the generators), [`histogram`] (real
+//! pairs subsampled to a generated overlap histogram), [`data`] (the real single-frame, real fragment and
+//! generated training pairs), [`scores_file`]
 //! (one unit's scores, written atomically), [`settings`] (the recorded training settings a rerun must
 //! match), [`table`] (the summary) and [`run`] (the resumable protocol).
 

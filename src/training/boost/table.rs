@@ -5,7 +5,6 @@
 //! training conditions: one training run moves all its pairs' scores together, so they are not independent
 //! (with `--redraw` the seeds also differ in their training pairs, and this interval covers that draw too).
 
-use super::conditions::{Condition, COMPARISONS};
 use crate::registration::report::{paired_difference, rows};
 use crate::registration::PairScore;
 use std::collections::BTreeMap;
@@ -31,7 +30,7 @@ impl Spread {
 pub struct ConditionRow {
     pub benchmark: String,
     pub samples: usize,
-    pub condition: Condition,
+    pub condition: String,
     pub seeds: usize,
     pub pairs: usize,
     pub fmr: Spread,
@@ -44,8 +43,8 @@ pub struct ConditionRow {
 pub struct PairedRow {
     pub benchmark: String,
     pub samples: usize,
-    pub a: Condition,
-    pub b: Condition,
+    pub a: String,
+    pub b: String,
     pub n: usize,
     pub mean: f64,
     pub lo: f64,
@@ -56,11 +55,13 @@ pub struct PairedRow {
     pub seed_hi: f64,
 }
 
-/// Each condition's scores per seed (C0: one entry) → the table's rows, by benchmark and sample count in
-/// first-seen order, conditions in order.
-pub fn summarize(results: &BTreeMap<Condition, Vec<Vec<PairScore>>>) -> (Vec<ConditionRow>, Vec<PairedRow>) {
+/// Each condition's scores per seed (untrained: one entry), by name in table order → the table's rows, by
+/// benchmark and sample count in first-seen order, conditions in order, and the paired differences of
+/// `comparisons` (first − second, by name).
+pub fn summarize(results: &[(String, Vec<Vec<PairScore>>)], comparisons: &[(String, String)]) -> (Vec<ConditionRow>, Vec<PairedRow>) {
+    let by_name: BTreeMap<&str, &Vec<Vec<PairScore>>> = results.iter().map(|(n, v)| (n.as_str(), v)).collect();
     let mut keys: Vec<(String, usize)> = Vec::new();
-    for s in results.values().flatten().flatten() {
+    for s in results.iter().flat_map(|(_, v)| v).flatten() {
         if !keys.contains(&(s.benchmark.clone(), s.samples)) {
             keys.push((s.benchmark.clone(), s.samples));
         }
@@ -68,8 +69,8 @@ pub fn summarize(results: &BTreeMap<Condition, Vec<Vec<PairScore>>>) -> (Vec<Con
     let mut table = Vec::new();
     let mut paired = Vec::new();
     for (bench, n) in &keys {
-        for (&c, per_seed) in results {
-            let r: Vec<_> = per_seed.iter().filter_map(|s| rows(c.name(), s).into_iter().find(|r| &r.benchmark == bench && r.samples == *n)).collect();
+        for (c, per_seed) in results {
+            let r: Vec<_> = per_seed.iter().filter_map(|s| rows(c, s).into_iter().find(|r| &r.benchmark == bench && r.samples == *n)).collect();
             if r.is_empty() {
                 continue;
             }
@@ -77,7 +78,7 @@ pub fn summarize(results: &BTreeMap<Condition, Vec<Vec<PairScore>>>) -> (Vec<Con
             table.push(ConditionRow {
                 benchmark: bench.clone(),
                 samples: *n,
-                condition: c,
+                condition: c.clone(),
                 seeds: r.len(),
                 pairs: r[0].pairs,
                 fmr: pick(|r| r.fmr),
@@ -85,8 +86,8 @@ pub fn summarize(results: &BTreeMap<Condition, Vec<Vec<PairScore>>>) -> (Vec<Con
                 rr: pick(|r| r.rr),
             });
         }
-        for (a, b) in COMPARISONS {
-            let (Some(sa), Some(sb)) = (results.get(&a), results.get(&b)) else { continue };
+        for (a, b) in comparisons {
+            let (Some(sa), Some(sb)) = (by_name.get(a.as_str()), by_name.get(b.as_str())) else { continue };
             let seeds = sa.len().max(sb.len());
             let (mut va, mut vb) = (Vec::new(), Vec::new());
             let (mut ma, mut mb) = (Vec::new(), Vec::new());
@@ -108,10 +109,18 @@ pub fn summarize(results: &BTreeMap<Condition, Vec<Vec<PairScore>>>) -> (Vec<Con
             }
             let (mean, lo, hi) = paired_difference(&va, &vb);
             let (_, seed_lo, seed_hi) = paired_difference(&ma, &mb);
-            paired.push(PairedRow { benchmark: bench.clone(), samples: *n, a, b, n: va.len(), mean, lo, hi, seeds: ma.len(), seed_lo, seed_hi });
+            paired.push(PairedRow { benchmark: bench.clone(), samples: *n, a: a.clone(), b: b.clone(), n: va.len(), mean, lo, hi, seeds: ma.len(), seed_lo, seed_hi });
         }
     }
     (table, paired)
+}
+
+/// A condition's name in the table: an alias with what it stands for (`C5x2 (single+classical)`).
+fn label(name: &str) -> String {
+    match super::conditions::alias_spec(name) {
+        Some(spec) => format!("{name} ({spec})"),
+        None => name.to_string(),
+    }
 }
 
 fn spread(s: &Spread, d: usize) -> String {
@@ -129,10 +138,10 @@ pub fn format_text(table: &[ConditionRow], paired: &[PairedRow]) -> String {
     }
     for (bench, n) in keys {
         let _ = writeln!(out, "{bench}, {n} samples (mean [min-max] over training seeds)");
-        let _ = writeln!(out, "{:<30} {:>5} {:>5}  {:>20}  {:>20}  {:>20}", "condition", "seeds", "pairs", "FMR %", "IR %", "RR %");
+        let _ = writeln!(out, "{:<34} {:>5} {:>5}  {:>20}  {:>20}  {:>20}", "condition", "seeds", "pairs", "FMR %", "IR %", "RR %");
         for r in table.iter().filter(|r| r.benchmark == bench && r.samples == n) {
-            let name = format!("{} {}", r.condition.name(), r.condition.label());
-            let _ = writeln!(out, "{name:<30} {:>5} {:>5}  {:>20}  {:>20}  {:>20}", r.seeds, r.pairs, spread(&r.fmr, 1), spread(&r.ir, 2), spread(&r.rr, 1));
+            let name = label(&r.condition);
+            let _ = writeln!(out, "{name:<34} {:>5} {:>5}  {:>20}  {:>20}  {:>20}", r.seeds, r.pairs, spread(&r.fmr, 1), spread(&r.ir, 2), spread(&r.rr, 1));
         }
         let rows: Vec<&PairedRow> = paired.iter().filter(|p| p.benchmark == bench && p.samples == n).collect();
         if !rows.is_empty() {
@@ -141,8 +150,8 @@ pub fn format_text(table: &[ConditionRow], paired: &[PairedRow]) -> String {
                 let over_seeds = if p.seeds >= 2 { format!("  over {} seeds [{:+.2}, {:+.2}]", p.seeds, p.seed_lo, p.seed_hi) } else { String::new() };
                 let _ = writeln!(
                     out,
-                    "  {:<12} {:>6} values  {:+.2} [{:+.2}, {:+.2}]{over_seeds}",
-                    format!("{} - {}", p.a.name(), p.b.name()),
+                    "  {:<30} {:>6} values  {:+.2} [{:+.2}, {:+.2}]{over_seeds}",
+                    format!("{} - {}", p.a, p.b),
                     p.n,
                     p.mean,
                     p.lo,
@@ -160,7 +169,7 @@ pub fn format_csv(table: &[ConditionRow]) -> String {
     let mut out = String::from("benchmark,samples,condition,seeds,pairs,fmr_mean,fmr_min,fmr_max,ir_mean,ir_min,ir_max,rr_mean,rr_min,rr_max\n");
     for r in table {
         let s = |x: &Spread| format!("{:.4},{:.4},{:.4}", x.mean, x.min, x.max);
-        let _ = writeln!(out, "{},{},{},{},{},{},{},{}", r.benchmark, r.samples, r.condition.name(), r.seeds, r.pairs, s(&r.fmr), s(&r.ir), s(&r.rr));
+        let _ = writeln!(out, "{},{},{},{},{},{},{},{}", r.benchmark, r.samples, r.condition, r.seeds, r.pairs, s(&r.fmr), s(&r.ir), s(&r.rr));
     }
     out
 }
@@ -174,8 +183,8 @@ pub fn format_paired_csv(paired: &[PairedRow]) -> String {
             "{},{},{},{},{},{:.4},{:.4},{:.4},{},{:.4},{:.4}",
             p.benchmark,
             p.samples,
-            p.a.name(),
-            p.b.name(),
+            p.a,
+            p.b,
             p.n,
             p.mean,
             p.lo,
@@ -212,18 +221,18 @@ mod tests {
     #[test]
     fn spread_over_seeds_and_paired_differences_by_hand() {
         // C0 once: IR 0.05, 0.15. C1 seed 0: 0.10, 0.20; seed 1: 0.30, 0.20.
-        let results = BTreeMap::from([
-            (Condition::C0, vec![vec![score(0, 0.05), score(1, 0.15)]]),
-            (Condition::C1, vec![vec![score(0, 0.10), score(1, 0.20)], vec![score(0, 0.30), score(1, 0.20)]]),
-        ]);
-        let (table, paired) = summarize(&results);
-        let c1 = table.iter().find(|r| r.condition == Condition::C1).unwrap();
+        let results = vec![
+            ("C0".to_string(), vec![vec![score(0, 0.05), score(1, 0.15)]]),
+            ("C1".to_string(), vec![vec![score(0, 0.10), score(1, 0.20)], vec![score(0, 0.30), score(1, 0.20)]]),
+        ];
+        let (table, paired) = summarize(&results, &[("C1".into(), "C0".into())]);
+        let c1 = table.iter().find(|r| r.condition == "C1").unwrap();
         assert_eq!((c1.seeds, c1.pairs), (2, 2));
         assert!((c1.ir.mean - 20.0).abs() < 1e-9 && (c1.ir.min - 15.0).abs() < 1e-9 && (c1.ir.max - 25.0).abs() < 1e-9);
         assert_eq!((c1.rr.min, c1.rr.max), (50.0, 100.0));
         // Differences (pp): 5, 5, 25, 5: mean 10, sd 10, t(3) = 3.182, half width 3.182 * 10 / 2.
         let p = &paired[0];
-        assert_eq!((p.a, p.b, p.n), (Condition::C1, Condition::C0, 4));
+        assert_eq!((p.a.as_str(), p.b.as_str(), p.n), ("C1", "C0", 4));
         assert!((p.mean - 10.0).abs() < 1e-9);
         assert!((p.hi - p.mean - 3.182446 * 5.0).abs() < 1e-2 && (p.mean - p.lo - 3.182446 * 5.0).abs() < 1e-2, "{p:?}");
         // Over seeds: seed 0's mean difference 5, seed 1's 15; mean 10, sd 7.071, t(1) = 12.706, half

@@ -4,6 +4,7 @@
 //! radius from it are the negatives). Adam with its moments in the checkpoint, so `--resume` continues
 //! exactly; the per-step randomness comes from (seed, step).
 
+use super::augment::{drop_filled, Augment};
 use super::data::{correspondences, TrainPair};
 use crate::error::{Error, Result};
 use crate::geometry::{Point, RadiusIndex};
@@ -19,13 +20,27 @@ use tch::{nn, Device, Kind, Tensor};
 pub const LATEST: &str = "latest.safetensors";
 /// The loss log (JSON lines).
 pub const LOSS_LOG: &str = "loss.jsonl";
+/// The sub-stream of a step's RNG the augmentation of each drawn pair forks (at the RNG's state then).
+const AUGMENT_STREAM: u64 = 0xA06;
 
 /// Everything a training run needs besides the data.
 #[derive(Clone, Debug, Serialize)]
 pub struct DescriptorTrainOptions {
     pub model: DescriptorModel,
-    /// Optimiser steps in total (a resumed run continues up to this count).
+    /// Optimiser steps in total (a resumed run continues up to this count), unless `epochs` is set.
     pub steps: u64,
+    /// Training by exposure: the step count follows the data, so that each training pair is drawn this
+    /// many times on average (steps = ⌈epochs × pairs / pairs per step⌉); adding pairs to a mix then no
+    /// longer shows each real pair fewer times.
+    pub epochs: Option<f64>,
+    /// Positives only on re-projected target points of generated pairs (`target_known_share` ≥ 0.5);
+    /// real pairs and datasets without provenance are unaffected.
+    pub known_positives: bool,
+    /// Drop the filled target points of generated pairs before training: they then appear in no local
+    /// frame, patch, feature or negative.
+    pub drop_filled: bool,
+    /// Noise and rotation applied each time a pair is drawn.
+    pub augment: Augment,
     /// Pairs per step.
     pub pairs_per_step: usize,
     /// Corresponding points per pair and step.
@@ -52,6 +67,10 @@ impl DescriptorTrainOptions {
         DescriptorTrainOptions {
             model: DescriptorModel::default(),
             steps: 1500,
+            epochs: None,
+            known_positives: false,
+            drop_filled: false,
+            augment: Augment::default(),
             pairs_per_step: 4,
             points_per_pair: 64,
             lr: 1e-3,
@@ -67,10 +86,27 @@ impl DescriptorTrainOptions {
         }
     }
 
+    /// The steps a run on `pairs` training pairs takes: `steps`, or the exposure `epochs` asks for.
+    pub fn total_steps(&self, pairs: usize) -> u64 {
+        match self.epochs {
+            Some(e) => ((e * pairs as f64) / self.pairs_per_step as f64).ceil().max(1.0) as u64,
+            None => self.steps,
+        }
+    }
+
     pub fn validate(&self) -> Result<()> {
         self.model.validate("descriptor")?;
         if self.steps == 0 || self.pairs_per_step == 0 || self.points_per_pair < 2 || self.checkpoint_every == 0 {
             return Err(Error::config("descriptor", "steps, pairs per step and checkpoint interval must be positive, points per pair at least 2"));
+        }
+        if self.epochs.is_some_and(|e| !(e.is_finite() && e > 0.0)) {
+            return Err(Error::config("--epochs", "must be a positive number"));
+        }
+        if !(self.augment.noise_m.is_finite() && self.augment.noise_m >= 0.0 && self.augment.noise_m <= 0.1) {
+            return Err(Error::config("--noise", "must be 0..=0.1 metres"));
+        }
+        if !(0.0..=180.0).contains(&self.augment.rotation_deg) {
+            return Err(Error::config("--rotation", "must be 0..=180 degrees"));
         }
         if !(self.lr > 0.0 && self.temperature > 0.0 && self.positive_radius_m > 0.0 && self.negative_radius_m >= self.positive_radius_m) {
             return Err(Error::config("descriptor", "lr, temperature and the positive radius must be positive, the negative radius at least the positive one"));
@@ -116,6 +152,8 @@ fn near_mask(targets: &[Point], radius: f32) -> Tensor {
 /// Result of a run.
 pub struct DescriptorTrainReport {
     pub first_step: u64,
+    /// The run's last step (`steps`, or what `epochs` resolved to).
+    pub steps: u64,
     pub parameters: i64,
     pub final_loss: f64,
 }
@@ -127,6 +165,15 @@ pub fn train_descriptor(pairs: &[TrainPair], opts: &DescriptorTrainOptions, mut 
         return Err(Error::config("--data", "no training pairs"));
     }
     std::fs::create_dir_all(&opts.out).map_err(|e| Error::io(&opts.out, e))?;
+    let dropped: Vec<TrainPair>;
+    let pairs = if opts.drop_filled {
+        dropped = pairs.iter().map(drop_filled).collect();
+        &dropped[..]
+    } else {
+        pairs
+    };
+    let steps = opts.total_steps(pairs.len());
+    let augmenting = !opts.augment.is_off();
     tch::manual_seed(opts.seed as i64);
     let mut vs = nn::VarStore::new(Device::Cpu);
     let net = DescriptorNet::new(&vs.root(), &opts.model)?;
@@ -149,9 +196,11 @@ pub fn train_descriptor(pairs: &[TrainPair], opts: &DescriptorTrainOptions, mut 
         }
         start = meta.step;
     }
-    let targets: Vec<RadiusIndex> = pairs.iter().map(|p| RadiusIndex::new(&p.target, opts.positive_radius_m)).collect();
-    // FPFH of every cloud once (33 floats per point and radius in memory); patch indexes per step.
-    let cached: Vec<[Prepared; 2]> = if net.worth_caching() {
+    // Without augmentation the clouds never change: index the targets once, and FPFH of every cloud once
+    // (33 floats per point and radius in memory); patch indexes per step.
+    let targets: Vec<RadiusIndex> =
+        if augmenting { Vec::new() } else { pairs.iter().map(|p| RadiusIndex::new(&p.target, opts.positive_radius_m)).collect() };
+    let cached: Vec<[Prepared; 2]> = if net.worth_caching() && !augmenting {
         let bar = crate::runtime::progress::bar(pairs.len() as u64, opts.progress, "pair");
         bar.set_message("input features");
         let c = pairs.iter().map(|p| [net.prepare(&p.source), net.prepare(&p.target)]);
@@ -163,18 +212,25 @@ pub fn train_descriptor(pairs: &[TrainPair], opts: &DescriptorTrainOptions, mut 
     };
     let log_path = opts.out.join(LOSS_LOG);
     let mut log = std::fs::OpenOptions::new().create(true).append(true).open(&log_path).map_err(|e| Error::io(&log_path, e))?;
-    let bar = crate::runtime::progress::bar(opts.steps, opts.progress, "step");
+    let bar = crate::runtime::progress::bar(steps, opts.progress, "step");
     bar.set_position(start);
     let t0 = std::time::Instant::now();
     let (mut sum, mut hits, mut count, mut last) = (0f64, 0f64, 0u64, f64::NAN);
-    for step in start + 1..=opts.steps {
+    for step in start + 1..=steps {
         let mut rng = Rng::new(opts.seed).fork(step);
         let mut step_loss = 0.0;
         let mut step_hits = 0.0;
         for _ in 0..opts.pairs_per_step {
             let k = rng.below(pairs.len() as u64) as usize;
-            let pair = &pairs[k];
-            let c = correspondences(pair, &targets[k], opts.points_per_pair, &mut rng);
+            let (augmented, fresh_index);
+            let (pair, index) = if augmenting {
+                augmented = opts.augment.apply(&pairs[k], &mut rng.fork(AUGMENT_STREAM));
+                fresh_index = RadiusIndex::new(&augmented.target, opts.positive_radius_m);
+                (&augmented, &fresh_index)
+            } else {
+                (&pairs[k], &targets[k])
+            };
+            let c = correspondences(pair, index, opts.points_per_pair, opts.known_positives, &mut rng);
             if c.len() < 2 {
                 continue;
             }
@@ -202,14 +258,14 @@ pub fn train_descriptor(pairs: &[TrainPair], opts: &DescriptorTrainOptions, mut 
         (sum, hits, count, last) = (sum + step_loss, hits + step_hits, count + 1, step_loss);
         bar.set_message(format!("loss {:.4}", sum / count as f64));
         bar.inc(1);
-        if step % opts.checkpoint_every == 0 || step == opts.steps {
+        if step % opts.checkpoint_every == 0 || step == steps {
             let report = StepReport { step, loss: sum / count as f64, accuracy: hits / count as f64, seconds: t0.elapsed().as_secs_f64() };
             writeln!(log, "{}", serde_json::to_string(&report).expect("json")).map_err(|e| Error::io(&log_path, e))?;
             let meta = DescriptorMeta {
                 format: FORMAT.into(),
                 model: opts.model.clone(),
                 step,
-                info: serde_json::json!({"options": opts, "pairs": pairs.len(), "last_loss": report.loss}),
+                info: serde_json::json!({"options": opts, "pairs": pairs.len(), "steps": steps, "last_loss": report.loss}),
             };
             let moments: Vec<(String, Tensor)> = [("opt.m.", &adam.m), ("opt.v.", &adam.v)]
                 .iter()
@@ -222,5 +278,5 @@ pub fn train_descriptor(pairs: &[TrainPair], opts: &DescriptorTrainOptions, mut 
     }
     bar.finish_and_clear();
     let parameters = vars.iter().map(|(_, t)| t.numel() as i64).sum();
-    Ok(DescriptorTrainReport { first_step: start + 1, parameters, final_loss: last })
+    Ok(DescriptorTrainReport { first_step: start + 1, steps, parameters, final_loss: last })
 }

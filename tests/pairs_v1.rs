@@ -1,0 +1,96 @@
+//! A dataset of schema `pairs/1`, built by the code before schema version 2 (tests/fixtures/pairs-v1, from
+//! tests/fixtures/pairs-v1.toml), is still read by `verify`, `query`, `export` and the library, and a build
+//! resumed on it writes its missing shard in version 1, the same rows the old code wrote; a fresh build
+//! of the same config gives the same pairs in version 2, plus provenance.
+
+mod support;
+
+use pointreggpt::shards::dataset::Dataset;
+use pointreggpt::shards::{PairRow, SCHEMA_VERSION_KEY};
+use std::path::{Path, PathBuf};
+use support::bin;
+
+fn fixture() -> (PathBuf, PathBuf) {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures");
+    (root.join("pairs-v1"), root.join("pairs-v1.toml"))
+}
+
+fn copy_dir(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for e in std::fs::read_dir(from).unwrap() {
+        let e = e.unwrap();
+        let target = to.join(e.file_name());
+        if e.file_type().unwrap().is_dir() {
+            copy_dir(&e.path(), &target);
+        } else {
+            std::fs::copy(e.path(), &target).unwrap();
+        }
+    }
+}
+
+fn run_ok(args: &[&str]) -> String {
+    let o = bin().args(args).output().unwrap();
+    assert!(o.status.success(), "{args:?}: {}", String::from_utf8_lossy(&o.stderr));
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+/// The `schema_version` a Parquet file's Arrow schema records.
+fn file_version(path: &Path) -> String {
+    let (schema, _) = pointreggpt::shards::read_parquet_file(path).unwrap();
+    schema.metadata().get(SCHEMA_VERSION_KEY).cloned().unwrap_or_default()
+}
+
+fn without_provenance(rows: &[PairRow]) -> Vec<PairRow> {
+    rows.iter().map(|r| PairRow { target_known_share: Vec::new(), target_view: Vec::new(), timings: Vec::new(), ..r.clone() }).collect()
+}
+
+#[test]
+fn a_version_1_dataset_is_read_exported_verified_and_resumed() {
+    let (fixture, config) = fixture();
+    let dir = tempfile::tempdir().unwrap();
+    let ds = dir.path().join("v1");
+    copy_dir(&fixture, &ds);
+    let text = std::fs::read_to_string(ds.join("dataset.toml")).unwrap();
+    assert!(text.contains("dataset.schema_version = \"pairs/1\""), "the fixture is a version-1 dataset");
+    let old_rows = Dataset::open(&ds).unwrap().read_pairs().unwrap();
+    assert_eq!(old_rows.len(), 6);
+    assert!(old_rows.iter().all(|r| r.target_known_share.is_empty() && r.target_view.is_empty()), "no provenance in version 1");
+
+    // verify, query (with the version-1 types) and export.
+    let v = run_ok(&["verify", ds.to_str().unwrap()]);
+    assert!(v.contains("3 committed") || v.to_lowercase().contains("ok"), "{v}");
+    let csv = run_ok(&["query", ds.to_str().unwrap(), "select unit_index, seed, sample_index from pairs order by unit_index", "--format", "csv"]);
+    let lines: Vec<&str> = csv.lines().skip(1).collect();
+    assert_eq!(lines.len(), 6, "{csv}");
+    for (line, r) in lines.iter().zip(&old_rows) {
+        assert_eq!(*line, format!("{},{},{}", r.unit_index, r.seed, r.sample_index), "the query gives the rows' unsigned values");
+    }
+    let types = run_ok(&["query", ds.to_str().unwrap(), "select arrow_typeof(seed) t from pairs limit 1", "--format", "csv"]);
+    assert!(types.contains("UInt64"), "{types}");
+    let geo = dir.path().join("geo");
+    let e = run_ok(&["export", ds.to_str().unwrap(), "--format", "geotransformer", "--out", geo.to_str().unwrap(), "--no-progress"]);
+    let ok = old_rows.iter().filter(|r| r.status == pointreggpt::shards::Status::Ok).count();
+    assert!(e.contains(&format!("wrote {ok} pairs")), "{e}");
+    let clouds = std::fs::read_dir(geo.join("data/train/synthetic-0")).unwrap().count();
+    assert_eq!(clouds, 2 * ok, "two clouds per pair and no provenance files");
+
+    // A resumed build: shard 2 withdrawn (as if the first build had been killed before it) is redone in
+    // version 1, with the rows the old code wrote.
+    std::fs::remove_file(ds.join("manifest/pairs-000002.json")).unwrap();
+    std::fs::remove_file(ds.join("shards/pairs-000002.parquet")).unwrap();
+    let b = run_ok(&["build", config.to_str().unwrap(), "--out", ds.to_str().unwrap(), "--no-progress"]);
+    assert!(b.contains("2 shards already committed, 1 committed now"), "{b}");
+    assert_eq!(file_version(&ds.join("shards/pairs-000002.parquet")), "pairs/1");
+    let resumed = Dataset::open(&ds).unwrap().read_pairs().unwrap();
+    let digests = |rows: &[PairRow]| rows.iter().map(|r| r.content_digest()).collect::<Vec<_>>();
+    assert_eq!(digests(&resumed), digests(&old_rows), "the resumed shard holds the rows the old code wrote");
+    run_ok(&["verify", ds.to_str().unwrap()]);
+
+    // A fresh build of the same config: version 2, the same pairs, and provenance.
+    let fresh = dir.path().join("v2");
+    run_ok(&["build", config.to_str().unwrap(), "--out", fresh.to_str().unwrap(), "--no-progress"]);
+    assert_eq!(file_version(&fresh.join("shards/pairs-000000.parquet")), "pairs/2");
+    let new_rows = Dataset::open(&fresh).unwrap().read_pairs().unwrap();
+    assert!(new_rows.iter().filter(|r| !r.target_points.is_empty()).all(|r| r.target_known_share.len() == r.target_points.len()));
+    assert_eq!(without_provenance(&new_rows), without_provenance(&old_rows), "the same pairs as the old code");
+}
