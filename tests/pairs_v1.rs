@@ -94,3 +94,57 @@ fn a_version_1_dataset_is_read_exported_verified_and_resumed() {
     assert!(new_rows.iter().filter(|r| !r.target_points.is_empty()).all(|r| r.target_known_share.len() == r.target_points.len()));
     assert_eq!(without_provenance(&new_rows), without_provenance(&old_rows), "the same pairs as the old code");
 }
+
+/// A varied row: an `ok` row with clouds and provenance, or a rejected one without.
+fn row(u: u64) -> PairRow {
+    let n = if u % 3 == 2 { 0 } else { 5 + u as usize };
+    PairRow {
+        unit_index: u,
+        pair_key: format!("s/frame-{u:06}#0"),
+        seed: u64::MAX - 5 * u, // above i64::MAX: stored as a negative int64
+        sample_index: u as u32,
+        width: 256,
+        height: 256,
+        pose_draws: 3,
+        target_points: (0..n).map(|i| pointreggpt::geometry::Point::new(i as f32, 0.5, 1.0)).collect(),
+        target_known_share: (0..n).map(|i| (i % 3) as f32 / 2.0).collect(),
+        target_view: (0..n).map(|i| (i % 2) as u8).collect(),
+        ..PairRow::default()
+    }
+}
+
+#[test]
+fn version_1_batches_convert_both_ways_bit_for_bit() {
+    use arrow::array::{Array, Int64Array, UInt64Array};
+    use pointreggpt::shards::pairs_v1::{downgrade, is_v1, to_current};
+    use pointreggpt::shards::{batch_to_pairs, pairs_to_batch};
+    let rows: Vec<PairRow> = (0..6).map(row).collect();
+    let v2 = pairs_to_batch(&rows).unwrap();
+    // Version 2 stores the seed bit for bit as int64 (checked against the two's complement by hand).
+    let seeds = v2.column_by_name("seed").unwrap().as_any().downcast_ref::<Int64Array>().unwrap();
+    assert_eq!(seeds.value(0), -1);
+    assert_eq!(seeds.value(1), -6);
+    assert_eq!(batch_to_pairs(&v2).unwrap(), rows, "a version-2 round trip is exact");
+    // Down to version 1: the unsigned values themselves, no provenance columns.
+    let v1 = downgrade(&v2).unwrap();
+    assert!(is_v1(&v1));
+    assert_eq!(v1.num_columns(), 28);
+    let seeds = v1.column_by_name("seed").unwrap().as_any().downcast_ref::<UInt64Array>().unwrap();
+    assert_eq!(seeds.values().to_vec(), rows.iter().map(|r| r.seed).collect::<Vec<_>>());
+    // Read back: the same rows without provenance; and up and down again gives the same batch.
+    assert_eq!(batch_to_pairs(&v1).unwrap(), without_provenance_keep_timings(&rows));
+    assert_eq!(downgrade(&to_current(&v1).unwrap()).unwrap(), v1);
+    assert_eq!(to_current(&v1).unwrap().column_by_name("target_known_share").unwrap().len(), 6);
+    // A batch labelled version 2 with version-1 columns is refused, naming the column.
+    let mislabelled = arrow::array::RecordBatch::try_new(
+        std::sync::Arc::new(arrow::datatypes::Schema::new_with_metadata(v1.schema().fields().clone(), v2.schema().metadata().clone())),
+        v1.columns().to_vec(),
+    )
+    .unwrap();
+    let e = to_current(&mislabelled).unwrap_err().to_string();
+    assert!(e.contains("pairs/2") && e.contains("unit_index"), "{e}");
+}
+
+fn without_provenance_keep_timings(rows: &[PairRow]) -> Vec<PairRow> {
+    rows.iter().map(|r| PairRow { target_known_share: Vec::new(), target_view: Vec::new(), ..r.clone() }).collect()
+}

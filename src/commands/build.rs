@@ -65,7 +65,7 @@ pub fn load_toml<T: serde::de::DeserializeOwned>(path: &Path, set: &[String]) ->
     for s in set {
         apply_override(&mut doc, s)?;
     }
-    toml::Value::Table(doc).try_into().map_err(|e: toml::de::Error| Error::config(path.display().to_string(), e.to_string()))
+    toml::Value::Table(doc).try_into().map_err(|e: toml::de::Error| crate::pipeline::config::config_error(&path.display().to_string(), &e))
 }
 
 /// Reads and validates a build config.

@@ -47,7 +47,7 @@ pub fn run(args: &DemoArgs, out: &mut dyn Write) -> Result<()> {
     let corrector = CorrectionConfig::OFFICIAL_MIN_POOL.build();
     let keep = corrector.keep_mask(&condition);
     let dropped_condition = apply_keep_mask(&mut condition, &mut known, &keep);
-    let mut target_depth = InpaintConfig::PushPull.build()?.inpaint(&condition, &known, &InpaintContext { intrinsics: k, seed: 0, t_target_from_source });
+    let mut target_depth = InpaintConfig::PushPull {}.build()?.inpaint(&condition, &known, &InpaintContext { intrinsics: k, seed: 0, t_target_from_source });
     let mut all_known = vec![true; known.len()];
     let keep = corrector.keep_mask(&target_depth);
     let dropped_output = apply_keep_mask(&mut target_depth, &mut all_known, &keep);

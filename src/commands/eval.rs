@@ -231,18 +231,18 @@ fn run_inpaint(a: &EvalInpaintArgs, out: &mut dyn Write) -> Result<()> {
         return run_pipelines(a, &pipelines, &views, &working, out);
     }
     let mut corrections = vec![
-        NamedCorrector { name: "none".into(), corrector: CorrectionConfig::None.build() },
+        NamedCorrector { name: "none".into(), corrector: CorrectionConfig::None {}.build() },
         NamedCorrector { name: "min_pool".into(), corrector: CorrectionConfig::OFFICIAL_MIN_POOL.build() },
     ];
     let unet = CorrectionConfig::Unet { checkpoint: ModelPath::new(&a.correction.display().to_string()), threshold: 0.99, preset: None };
     unet.validate("--correction")?;
     corrections.push(NamedCorrector { name: "unet@0.99".into(), corrector: unet.build() });
     let mut fills = vec![
-        NamedFill { name: "none".into(), inpainter: InpaintConfig::None.build()? },
-        NamedFill { name: "push_pull".into(), inpainter: InpaintConfig::PushPull.build()? },
-        NamedFill { name: "nearest".into(), inpainter: InpaintConfig::Nearest.build()? },
-        NamedFill { name: "background".into(), inpainter: InpaintConfig::Background.build()? },
-        NamedFill { name: "ip_basic".into(), inpainter: InpaintConfig::IpBasic.build()? },
+        NamedFill { name: "none".into(), inpainter: InpaintConfig::None {}.build()? },
+        NamedFill { name: "push_pull".into(), inpainter: InpaintConfig::PushPull {}.build()? },
+        NamedFill { name: "nearest".into(), inpainter: InpaintConfig::Nearest {}.build()? },
+        NamedFill { name: "background".into(), inpainter: InpaintConfig::Background {}.build()? },
+        NamedFill { name: "ip_basic".into(), inpainter: InpaintConfig::IpBasic {}.build()? },
     ];
     // A network trained only on the nearly clean steps (`train diffusion --max-t`) has no pure-noise row.
     let low_steps_only = crate::diffusion::checkpoint::read_meta(&a.diffusion).ok().and_then(|m| m.trained_below_step()).is_some();

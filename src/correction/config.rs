@@ -8,8 +8,8 @@ use serde::{Deserialize, Serialize};
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "method", rename_all = "snake_case", deny_unknown_fields)]
 pub enum CorrectionConfig {
-    /// Keep every pixel.
-    None,
+    /// Keep every pixel. (An empty struct variant, so that serde refuses settings beside it.)
+    None {},
     /// The official hand-crafted filter: drop a pixel at least `threshold` metres behind the nearest
     /// valid depth of its 3×3 neighbourhood (official 0.0375 m).
     MinPool { threshold: f32 },
@@ -44,7 +44,7 @@ impl CorrectionConfig {
     pub fn validate(&self, field: &str) -> crate::Result<()> {
         let bad = |m: &str| Err(crate::Error::config(field, m));
         match *self {
-            CorrectionConfig::None => Ok(()),
+            CorrectionConfig::None {} => Ok(()),
             CorrectionConfig::MinPool { threshold } | CorrectionConfig::Median { threshold, .. } if !(threshold > 0.0 && threshold.is_finite()) => {
                 bad("threshold must be a positive number of metres")
             }
@@ -65,7 +65,7 @@ impl CorrectionConfig {
     /// The corrector this config describes.
     pub fn build(&self) -> Box<dyn Corrector> {
         match *self {
-            CorrectionConfig::None => Box::new(NoCorrection),
+            CorrectionConfig::None {} => Box::new(NoCorrection),
             CorrectionConfig::MinPool { threshold } => Box::new(MinPoolFilter { threshold }),
             CorrectionConfig::Median { window, threshold } => Box::new(MedianFilter { window, threshold }),
             // `validate` loads the checkpoint first, so this only fails if the file changed in between.

@@ -4,21 +4,24 @@
 use super::{Background, DiffusionInpaintConfig, DiffusionInpainter, Inpainter, IpBasic, Nearest, NoInpainting, PushPull};
 use serde::{Deserialize, Serialize};
 
-/// The inpainting methods a pipeline config can name.
+/// The inpainting methods a pipeline config can name. The methods without settings are empty struct
+/// variants, not unit variants: serde then refuses a key such as `steps` beside `method = "background"`
+/// (it silently ignores extra keys of a unit variant of an internally tagged enum); the config loader
+/// adds which method has that setting ([`crate::pipeline::config::method_setting_hint`]).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "method", rename_all = "snake_case", deny_unknown_fields)]
 pub enum InpaintConfig {
     /// No filling: the target keeps only the re-projected pixels.
-    None,
+    None {},
     /// Classical push–pull pyramid fill (smooth, fast; blends the two sides of a depth edge).
-    PushPull,
+    PushPull {},
     /// Copies the nearest known pixel (exact Euclidean distance).
-    Nearest,
+    Nearest {},
     /// Occlusion-aware: copies the farther of the two hole borders along the epipolar direction of the
     /// camera motion (the uncovered background of a disocclusion).
-    Background,
+    Background {},
     /// IP-Basic (Ku et al. 2018): morphological completion of inverted depth (nearer surfaces grow).
-    IpBasic,
+    IpBasic {},
     /// The diffusion model with the exact range–null-space step (paper §3.2, reference §5.4).
     Diffusion(DiffusionInpaintConfig),
 }
@@ -43,11 +46,11 @@ impl InpaintConfig {
     /// The inpainter this config describes (call [`Self::validate`] first).
     pub fn build(&self) -> crate::Result<Box<dyn Inpainter>> {
         Ok(match self {
-            InpaintConfig::None => Box::new(NoInpainting),
-            InpaintConfig::PushPull => Box::new(PushPull),
-            InpaintConfig::Nearest => Box::new(Nearest),
-            InpaintConfig::Background => Box::new(Background),
-            InpaintConfig::IpBasic => Box::new(IpBasic),
+            InpaintConfig::None {} => Box::new(NoInpainting),
+            InpaintConfig::PushPull {} => Box::new(PushPull),
+            InpaintConfig::Nearest {} => Box::new(Nearest),
+            InpaintConfig::Background {} => Box::new(Background),
+            InpaintConfig::IpBasic {} => Box::new(IpBasic),
             InpaintConfig::Diffusion(c) => Box::new(DiffusionInpainter::load(c, tch::Device::Cpu)?),
         })
     }

@@ -88,7 +88,7 @@ mod tests {
 
     /// Every classical method, as the config names them.
     fn classical() -> Vec<Box<dyn Inpainter>> {
-        [InpaintConfig::None, InpaintConfig::PushPull, InpaintConfig::Nearest, InpaintConfig::Background, InpaintConfig::IpBasic]
+        [InpaintConfig::None {}, InpaintConfig::PushPull {}, InpaintConfig::Nearest {}, InpaintConfig::Background {}, InpaintConfig::IpBasic {}]
             .iter()
             .map(|c| c.build().unwrap())
             .collect()
@@ -135,10 +135,10 @@ mod tests {
         let mut ctx = test_context(&d);
         ctx.t_target_from_source = Isometry3::translation(0.1, 0.05, 0.0);
         let pool: Vec<u32> = (0..data.len()).filter(|i| known[*i]).map(|i| data[i].to_bits()).collect();
-        let nearest = InpaintConfig::Nearest.build().unwrap().inpaint(&d, &known, &ctx);
+        let nearest = InpaintConfig::Nearest {}.build().unwrap().inpaint(&d, &known, &ctx);
         assert!(nearest.data().iter().all(|z| pool.contains(&z.to_bits())));
         let (lo, hi) = pool.iter().map(|b| f32::from_bits(*b)).fold((f32::MAX, 0.0f32), |(l, h), z| (l.min(z), h.max(z)));
-        for m in [InpaintConfig::Background, InpaintConfig::PushPull, InpaintConfig::IpBasic] {
+        for m in [InpaintConfig::Background {}, InpaintConfig::PushPull {}, InpaintConfig::IpBasic {}] {
             // (IP-Basic's blurs average known depths; it leaves 0 where its dilations do not reach.)
             let out = m.build().unwrap().inpaint(&d, &known, &ctx);
             assert!(out.data().iter().all(|z| (*z >= lo - 1e-5 && *z <= hi + 1e-5) || *z == 0.0), "{m:?}");

@@ -71,13 +71,44 @@ fn default_shard_size() -> u64 {
     64
 }
 fn default_inpaint() -> InpaintConfig {
-    InpaintConfig::Background
+    InpaintConfig::Background {}
+}
+
+/// The settings of the methods of the `[inpaint]` and `[correct.*]` sections (a method not listed has
+/// none), for the hint of [`method_setting_hint`]; `tests::setting_lists_match_the_config_types` keeps
+/// them equal to the config types' fields.
+const METHOD_SETTINGS: [(&str, &[&str]); 4] = [
+    ("inpaint method \"diffusion\"", &["checkpoint", "steps", "eta", "start", "start_step", "batch", "resample"]),
+    ("correction method \"min_pool\"", &["threshold"]),
+    ("correction method \"median\"", &["window", "threshold"]),
+    ("correction method \"unet\"", &["checkpoint", "threshold", "preset"]),
+];
+
+/// For a config error about an unknown field (`unknown field `steps``), which methods have that setting:
+/// a key given beside a method that does not use it (`--set inpaint.steps=5` with `method =
+/// "background"`) is refused, and the message says where it belongs.
+pub fn method_setting_hint(message: &str) -> Option<String> {
+    let key = message.split("unknown field `").nth(1)?.split('`').next()?;
+    let owners: Vec<&str> = METHOD_SETTINGS.iter().filter(|(_, keys)| keys.contains(&key)).map(|(m, _)| *m).collect();
+    if owners.is_empty() {
+        return None;
+    }
+    Some(format!("`{key}` is a setting of {} only: remove it, or choose that method", owners.join(", ")))
+}
+
+/// A config error for `origin`, with [`method_setting_hint`] added when it applies.
+pub fn config_error(origin: &str, e: &toml::de::Error) -> Error {
+    let message = e.to_string();
+    match method_setting_hint(&message) {
+        Some(hint) => Error::config(origin, format!("{message}\n{hint}")),
+        None => Error::config(origin, message),
+    }
 }
 
 impl BuildConfig {
     /// Parses TOML text; errors name the offending key.
     pub fn from_toml(text: &str, origin: &str) -> Result<Self> {
-        toml::from_str(text).map_err(|e| Error::config(origin, e.to_string()))
+        toml::from_str(text).map_err(|e| config_error(origin, &e))
     }
 
     /// The config as canonical TOML (every default written out).
@@ -182,5 +213,60 @@ mod tests {
         assert_ne!(c.dataset_hash(), d.dataset_hash());
         d.seed = 1;
         assert_ne!(c.content_hash(), d.content_hash());
+    }
+}
+
+#[cfg(test)]
+mod method_setting_tests {
+    use super::*;
+    use crate::correction::CorrectionConfig;
+    use crate::inpainting::DiffusionInpaintConfig;
+
+    fn keys(v: impl Serialize) -> Vec<String> {
+        match toml::Value::try_from(v).unwrap() {
+            toml::Value::Table(t) => t.keys().filter(|k| *k != "method").cloned().collect(),
+            other => panic!("{other}"),
+        }
+    }
+
+    #[test]
+    fn setting_lists_match_the_config_types() {
+        let diffusion = DiffusionInpaintConfig {
+            checkpoint: crate::nn::ModelPath::new("m.safetensors"),
+            steps: 2,
+            eta: 0.0,
+            start: Default::default(),
+            start_step: 0,
+            batch: 2,
+            resample: Some(crate::diffusion::sampler::Resample { jump: 2, repeats: 2 }),
+        };
+        let mut got = keys(InpaintConfig::Diffusion(diffusion));
+        let unet = CorrectionConfig::Unet { checkpoint: crate::nn::ModelPath::new("c"), threshold: 0.5, preset: Some(crate::nn::Preset::Tiny) };
+        let lists = [
+            keys(CorrectionConfig::MinPool { threshold: 0.1 }),
+            keys(CorrectionConfig::Median { window: 3, threshold: 0.1 }),
+            keys(unet),
+        ];
+        let mut want: Vec<Vec<String>> = METHOD_SETTINGS.iter().map(|(_, k)| k.iter().map(|s| s.to_string()).collect()).collect();
+        want.iter_mut().for_each(|w| w.sort());
+        got.sort();
+        assert_eq!(got, want[0]);
+        for (i, mut l) in lists.into_iter().enumerate() {
+            l.sort();
+            assert_eq!(l, want[i + 1]);
+        }
+        for m in [InpaintConfig::None {}, InpaintConfig::Background {}, InpaintConfig::Nearest {}, InpaintConfig::PushPull {}, InpaintConfig::IpBasic {}] {
+            assert!(keys(m).is_empty());
+        }
+    }
+
+    #[test]
+    fn a_setting_beside_a_method_without_it_is_refused_naming_its_method() {
+        let base = "[source]\nkind = \"synthetic\"\n";
+        let e = BuildConfig::from_toml(&format!("{base}[inpaint]\nmethod = \"background\"\nsteps = 5\n"), "t").unwrap_err().to_string();
+        assert!(e.contains("steps") && e.contains("diffusion"), "{e}");
+        let e = BuildConfig::from_toml(&format!("{base}[correct.condition]\nmethod = \"none\"\nthreshold = 0.1\n"), "t").unwrap_err().to_string();
+        assert!(e.contains("threshold") && e.contains("min_pool") && e.contains("unet"), "{e}");
+        assert!(BuildConfig::from_toml(&format!("{base}[inpaint]\nmethod = \"background\"\n"), "t").is_ok());
     }
 }

@@ -394,15 +394,4 @@ pub(crate) mod tests {
         let err = batch_to_pairs(&bad).unwrap_err().to_string();
         assert!(err.contains("unit_index") && err.contains("uint64"), "{err}");
     }
-
-    #[test]
-    fn seeds_are_stored_bit_for_bit_in_signed_columns() {
-        let mut row = sample_row(0);
-        row.seed = u64::MAX - 5; // above i64::MAX
-        row.unit_index = 7;
-        let batch = pairs_to_batch(std::slice::from_ref(&row)).unwrap();
-        let seed = batch.column_by_name("seed").unwrap().as_any().downcast_ref::<Int64Array>().unwrap().value(0);
-        assert_eq!(seed, -6, "u64::MAX - 5 as two's complement");
-        assert_eq!(batch_to_pairs(&batch).unwrap()[0].seed, u64::MAX - 5);
-    }
 }

@@ -109,7 +109,7 @@ impl DiffusionTrainOptions {
             holes: false,
             hole_weight: 4.0,
             hole_start: Start::PushPull,
-            hole_corrections: vec![CorrectionConfig::None, CorrectionConfig::OFFICIAL_MIN_POOL],
+            hole_corrections: vec![CorrectionConfig::None {}, CorrectionConfig::OFFICIAL_MIN_POOL],
             ema_beta: 0.995,
             ema_every: 10,
             ema_after: 100,
