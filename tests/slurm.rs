@@ -88,6 +88,8 @@ impl Cluster {
         );
         cluster.wait_for("munged's socket", || socket.exists());
         let p = |name: &str| d.join(name).display().to_string();
+        // Ports of our own, so that a system Slurm on the default ones is never reached.
+        let ports = std::iter::repeat_with(|| (free_port(), free_port())).find(|(a, b)| a != b).unwrap();
         std::fs::write(
             &conf,
             format!(
@@ -101,8 +103,8 @@ impl Cluster {
                  SlurmdParameters=config_overrides\nSchedulerParameters=sched_interval=1\nMailProg=/bin/true\n\
                  NodeName=localhost NodeAddr=127.0.0.1 CPUs=32 RealMemory=65536 State=UNKNOWN\n\
                  PartitionName=debug Nodes=ALL Default=YES MaxTime=INFINITE State=UP\n",
-                ctld = free_port(),
-                slurmd = free_port(),
+                ctld = ports.0,
+                slurmd = ports.1,
                 sock = socket.display(),
                 state = p("state"),
                 spool = p("spool"),
@@ -306,6 +308,19 @@ fn sbatch(cluster: &Cluster, cwd: &Path, out: &Path, wait: bool) -> Command {
     c
 }
 
+/// Waits for `sbatch --wait` (up to 10 minutes: a job that can never run would hang it).
+fn finish(mut child: Child, cluster: &Cluster) -> Output {
+    let t0 = Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if t0.elapsed() > Duration::from_secs(600) {
+            let _ = child.kill();
+            panic!("sbatch --wait still waiting after 10 minutes\n{}", cluster.logs());
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    child.wait_with_output().unwrap()
+}
+
 /// The job id that `sbatch` printed ("Submitted batch job N" or, with --parsable, "N").
 fn job_id(stdout: &str) -> String {
     stdout.split_whitespace().last().unwrap_or_default().split(';').next().unwrap().to_string()
@@ -338,7 +353,7 @@ fn the_slurm_template_builds_the_one_process_dataset_and_a_cancelled_task_resume
     let cwd = root.join("job");
     let out = root.join("array");
     let t = Instant::now();
-    let o = sbatch(&cluster, &cwd, &out, true).output().unwrap();
+    let o = finish(sbatch(&cluster, &cwd, &out, true).spawn().unwrap(), &cluster);
     let said = String::from_utf8_lossy(&o.stdout).to_string();
     assert!(
         o.status.success(),
@@ -409,7 +424,7 @@ fn the_slurm_template_builds_the_one_process_dataset_and_a_cancelled_task_resume
         assert_eq!(cancelled, (TASKS - 1) * per_task + after);
 
         // The same submission again resumes: only the cancelled task's remaining shards are built.
-        let o = sbatch(&cluster, &cwd, &out, true).output().unwrap();
+        let o = finish(sbatch(&cluster, &cwd, &out, true).spawn().unwrap(), &cluster);
         let said = String::from_utf8_lossy(&o.stdout).to_string();
         assert!(o.status.success(), "resubmission failed: {said}{}", String::from_utf8_lossy(&o.stderr));
         let again = job_id(&said);
