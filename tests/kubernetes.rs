@@ -115,7 +115,7 @@ fn the_kubernetes_pods_command_builds_the_one_process_dataset_with_job_completio
     let secret = c["envFrom"][0]["secretRef"]["name"].as_str().unwrap();
     assert!(!secret.is_empty());
 
-    // The pods, run here one index after another: the container's command verbatim, but the binary of
+    // The pods, run here four indexes at a time: the container's command verbatim, but the binary of
     // this build, the config mount replaced by a small synthetic config (whose source has no
     // `source.path`, so that override is dropped), the secret's AWS_* variables pointing at moto, and
     // JOB_COMPLETION_INDEX the only worker variable.
