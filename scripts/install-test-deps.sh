@@ -1,13 +1,21 @@
 #!/usr/bin/env bash
-# Installs the Python modules the integration tests need, pinned: pyarrow and duckdb, which they read shards
-# with (tests/python/read_shards.py); moto[s3] with flask and flask-cors, the local S3 server tests/store.rs
-# starts (`python3 -m moto.server`; it brings boto3, which tests/python/s3_peer.py uses); and torch 2.13.0
-# with safetensors, which tests/checkpoints.rs saves and converts the authors' kind of checkpoints with (through scripts/install-network-peers.sh: PyPI's CUDA
-# build, ~3 GB to download, 4.6 GB installed, 54 s here; it runs on the CPU). `make test` and .ci/run run
-# this first. open3d 0.19.0 (with Debian's libusb-1.0-0, which its import may need) is the peer of
-# tests/registration.rs (normals, FPFH, RANSAC; tests/python/open3d_registration.py): a ~450 MB wheel.
+# Installs what the integration tests need, pinned.
+# - Python (pip): pyarrow and duckdb, which they read shards with (tests/python/read_shards.py); moto[s3]
+#   with flask and flask-cors, the local S3 server tests/store.rs starts (`python3 -m moto.server`; it brings
+#   boto3, which tests/python/s3_peer.py uses); azure-storage-blob, which tests/python/az_peer.py creates
+#   containers and lists blobs with for tests/azure.rs; kubernetes-validate (it bundles the Kubernetes
+#   schemas: tests/kubernetes.rs validates pipelines/k8s-build-job.yaml offline); and torch 2.13.0 with
+#   safetensors, which tests/checkpoints.rs saves and converts the authors' kind of checkpoints with (through
+#   scripts/install-network-peers.sh: PyPI's CUDA build, ~3 GB to download, 4.6 GB installed, 54 s here; it
+#   runs on the CPU). open3d 0.19.0 (with Debian's libusb-1.0-0, which its import may need) is the peer of
+#   tests/registration.rs (normals, FPFH, RANSAC; tests/python/open3d_registration.py): a ~450 MB wheel.
+# - npm: azurite, the Azure Blob server tests/azure.rs starts (`azurite-blob`, installed globally; ~20 s
+#   and ~360 MB; it needs Node.js and npm, from Debian when missing).
+# - Debian (apt): slurm-wlm and munge, the one-node Slurm cluster tests/slurm.rs starts (~8 s).
+# `make test` and .ci/run run this first.
 #
-# Idempotent: installs nothing that already imports.
+# Idempotent: installs nothing that is already there (Python modules that import, Debian packages that
+# are installed, azurite at the pinned version).
 # PYTHON selects the interpreter (default python3).
 set -euo pipefail
 
@@ -18,7 +26,10 @@ MOTO_VERSION="5.2.1"
 FLASK_VERSION="3.1.3"
 FLASK_CORS_VERSION="6.0.2"
 OPEN3D_VERSION="0.19.0"
-CHECK='import pyarrow, duckdb, moto.server, flask, flask_cors, boto3, open3d'
+AZURE_BLOB_VERSION="12.31.1"
+KUBERNETES_VALIDATE_VERSION="1.37.0"
+AZURITE_VERSION="3.37.0"
+CHECK='import pyarrow, duckdb, moto.server, flask, flask_cors, boto3, open3d, azure.storage.blob, kubernetes_validate'
 
 die() {
     echo "install-test-deps: $*" >&2
@@ -29,31 +40,58 @@ modules_import() {
     "$PYTHON" -c "$CHECK" >/dev/null 2>&1
 }
 
-# libusb-1.0-0 from Debian (open3d loads it at import on some builds): apt-get update only when the
-# plain install fails (stale lists).
-install_libusb() {
-    if dpkg -s libusb-1.0-0 >/dev/null 2>&1; then
-        return 0
-    fi
+# Debian packages: `apt-get update` only when the plain install fails (stale or missing lists).
+# apt_install WHY PACKAGE...
+apt_install() {
+    local why="$1" missing=()
+    shift
+    for p in "$@"; do
+        dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p")
+    done
+    [[ ${#missing[@]} -eq 0 ]] && return 0
     if ! command -v apt-get >/dev/null 2>&1 || [[ $(id -u) -ne 0 ]]; then
-        echo "install-test-deps: warning: cannot install libusb-1.0-0 (needs root and apt-get); open3d may fail to import" >&2
+        echo "install-test-deps: warning: cannot install ${missing[*]} (needs root and apt-get); $why" >&2
         return 0
     fi
-    echo "install-test-deps: apt-get install libusb-1.0-0"
-    if ! DEBIAN_FRONTEND=noninteractive apt-get install -y -q libusb-1.0-0 >/dev/null; then
+    echo "install-test-deps: apt-get install ${missing[*]}"
+    if ! DEBIAN_FRONTEND=noninteractive apt-get install -y -q "${missing[@]}" >/dev/null; then
         DEBIAN_FRONTEND=noninteractive apt-get update -q >/dev/null ||
             die "apt-get update failed: is the Debian package registry reachable?"
-        DEBIAN_FRONTEND=noninteractive apt-get install -y -q libusb-1.0-0 >/dev/null ||
-            die "apt-get install libusb-1.0-0 failed"
+        DEBIAN_FRONTEND=noninteractive apt-get install -y -q "${missing[@]}" >/dev/null ||
+            die "apt-get install ${missing[*]} failed (see apt's message above)"
     fi
+}
+
+# Azurite from npm, pinned, installed globally (its `azurite-blob` lands on the PATH).
+install_azurite() {
+    if command -v azurite-blob >/dev/null 2>&1 && [[ "$(azurite-blob --version 2>/dev/null)" == "$AZURITE_VERSION" ]]; then
+        return 0
+    fi
+    if ! command -v npm >/dev/null 2>&1; then
+        apt_install "tests/azure.rs cannot start Azurite" nodejs npm
+        command -v npm >/dev/null 2>&1 || die "npm is missing: install Node.js (18 or newer) and npm, then rerun"
+    fi
+    echo "install-test-deps: npm install -g azurite@$AZURITE_VERSION"
+    npm install -g --no-audit --no-fund --loglevel=error "azurite@$AZURITE_VERSION" >/dev/null ||
+        die "npm install -g azurite@$AZURITE_VERSION failed: is the npm registry reachable? (see npm's message above)"
+    [[ "$(azurite-blob --version 2>/dev/null)" == "$AZURITE_VERSION" ]] ||
+        die "azurite $AZURITE_VERSION was installed but \`azurite-blob --version\` does not say so (is npm's global bin, $(npm prefix -g)/bin, on the PATH?)"
+}
+
+system_deps() {
+    apt_install "open3d may fail to import" libusb-1.0-0
+    apt_install "tests/slurm.rs cannot start a Slurm cluster" slurm-wlm munge
+    install_azurite
 }
 
 torch_peers() {
     PYTHON="$PYTHON" "$(dirname "$0")/install-network-peers.sh"
 }
 
+system_deps
+
 if modules_import; then
-    echo "install-test-deps: already installed ($("$PYTHON" -c 'import pyarrow, duckdb, importlib.metadata as m; print("pyarrow", pyarrow.__version__, "duckdb", duckdb.__version__, "moto", m.version("moto"), "open3d", m.version("open3d"))'))"
+    echo "install-test-deps: already installed ($("$PYTHON" -c 'import pyarrow, duckdb, importlib.metadata as m; print("pyarrow", pyarrow.__version__, "duckdb", duckdb.__version__, "moto", m.version("moto"), "open3d", m.version("open3d"), "azure-storage-blob", m.version("azure-storage-blob"), "kubernetes-validate", m.version("kubernetes-validate"))'), azurite $(azurite-blob --version 2>/dev/null), $(slurmctld -V 2>/dev/null))"
     torch_peers
     exit 0
 fi
@@ -61,17 +99,17 @@ fi
 command -v "$PYTHON" >/dev/null 2>&1 || die "no Python interpreter '$PYTHON' (set PYTHON=...)"
 "$PYTHON" -m pip --version >/dev/null 2>&1 || die "'$PYTHON -m pip' does not work; install pip first"
 
-install_libusb
-echo "install-test-deps: $PYTHON -m pip install pyarrow==$PYARROW_VERSION duckdb==$DUCKDB_VERSION moto[s3]==$MOTO_VERSION flask==$FLASK_VERSION flask-cors==$FLASK_CORS_VERSION open3d==$OPEN3D_VERSION"
+echo "install-test-deps: $PYTHON -m pip install pyarrow==$PYARROW_VERSION duckdb==$DUCKDB_VERSION moto[s3]==$MOTO_VERSION flask==$FLASK_VERSION flask-cors==$FLASK_CORS_VERSION open3d==$OPEN3D_VERSION azure-storage-blob==$AZURE_BLOB_VERSION kubernetes-validate==$KUBERNETES_VALIDATE_VERSION"
 if ! "$PYTHON" -m pip install --disable-pip-version-check -q \
     "pyarrow==$PYARROW_VERSION" "duckdb==$DUCKDB_VERSION" "moto[s3]==$MOTO_VERSION" \
-    "flask==$FLASK_VERSION" "flask-cors==$FLASK_CORS_VERSION" "open3d==$OPEN3D_VERSION"; then
+    "flask==$FLASK_VERSION" "flask-cors==$FLASK_CORS_VERSION" "open3d==$OPEN3D_VERSION" \
+    "azure-storage-blob==$AZURE_BLOB_VERSION" "kubernetes-validate==$KUBERNETES_VALIDATE_VERSION"; then
     die "pip install failed: is PyPI reachable? (see pip's message above)"
 fi
 
 if ! modules_import; then
     "$PYTHON" -c "$CHECK" || true
-    die "pyarrow, duckdb, moto and open3d were installed but do not import (see the error above)"
+    die "pyarrow, duckdb, moto, open3d, azure-storage-blob and kubernetes-validate were installed but do not import (see the error above)"
 fi
 torch_peers
 echo "install-test-deps: done"

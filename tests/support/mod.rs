@@ -1,6 +1,7 @@
 //! Shared fixtures for the integration tests.
 #![allow(dead_code)]
 
+pub mod azure;
 pub mod store;
 
 use std::path::PathBuf;

@@ -144,9 +144,16 @@ impl ObjectDatasetStore {
                         Err(e) => return Err(self.err(&object_rel, e)),
                     }
                 }
-                if !self.is_committed(&object)? && self.object_size(&object)?.is_some() {
-                    self.delete(&object_rel)?;
-                    removed.push(self.locate(&object_rel));
+                if !self.is_committed(&object)? {
+                    if self.object_size(&object)?.is_some() {
+                        self.delete(&object_rel)?;
+                        removed.push(self.locate(&object_rel));
+                    } else if record.upload_id.is_some() {
+                        // Azure has no upload to abort (object_store's abort is a no-op there): the
+                        // uploaded blocks belong to the blob name, invisible to listings and HEAD until
+                        // committed. Deleting the name drops them (on S3 this deletes nothing).
+                        self.delete(&object_rel)?;
+                    }
                 }
             }
             self.delete(&record_rel)?;
