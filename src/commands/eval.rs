@@ -310,7 +310,7 @@ fn run_pipelines(
 fn correction_name(c: &crate::correction::CorrectionConfig) -> String {
     use crate::correction::CorrectionConfig as C;
     match c {
-        C::None => "none".into(),
+        C::None {} => "none".into(),
         C::MinPool { .. } => "min_pool".into(),
         C::Median { .. } => "median".into(),
         C::Unet { threshold, .. } => format!("unet@{threshold}"),

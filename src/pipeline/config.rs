@@ -262,7 +262,7 @@ mod method_setting_tests {
 
     #[test]
     fn a_setting_beside_a_method_without_it_is_refused_naming_its_method() {
-        let base = "[source]\nkind = \"synthetic\"\n";
+        let base = "[source]\nkind = \"synthetic\"\nscenes = 1\n";
         let e = BuildConfig::from_toml(&format!("{base}[inpaint]\nmethod = \"background\"\nsteps = 5\n"), "t").unwrap_err().to_string();
         assert!(e.contains("steps") && e.contains("diffusion"), "{e}");
         let e = BuildConfig::from_toml(&format!("{base}[correct.condition]\nmethod = \"none\"\nthreshold = 0.1\n"), "t").unwrap_err().to_string();

@@ -4,7 +4,7 @@
 //! resumes such a dataset writes its new shards back in version 1 ([`downgrade`]), so a dataset never
 //! mixes versions.
 
-use super::schema::{list_item, pairs_schema, pairs_schema_mismatch, pairs_schema_v1, SCHEMA_VERSION_1, SCHEMA_VERSION_KEY};
+use super::schema::{list_item, pairs_schema, pairs_schema_v1, pairs_version_of, SCHEMA_VERSION_1};
 use crate::error::{Error, Result};
 use arrow::array::{Array, ArrayRef, Float32Array, Int32Array, Int64Array, Int8Array, ListArray, RecordBatch, UInt32Array, UInt64Array};
 use arrow::buffer::OffsetBuffer;
@@ -17,21 +17,18 @@ const NARROW: [&str; 4] = ["sample_index", "width", "height", "pose_draws"];
 /// The columns version 2 added.
 const PROVENANCE: [&str; 2] = ["target_known_share", "target_view"];
 
-/// Whether `batch` says it is version 1.
+/// Whether `batch` is version 1 (by its metadata, or by its columns when it has none).
 pub fn is_v1(batch: &RecordBatch) -> bool {
-    batch.schema().metadata().get(SCHEMA_VERSION_KEY).map(String::as_str) == Some(SCHEMA_VERSION_1)
+    pairs_version_of(&batch.schema()) == Ok(SCHEMA_VERSION_1)
 }
 
 /// `batch` as a version-2 batch: itself when it is one, upgraded when it is version 1. Errors name the
 /// column when it matches neither.
 pub fn to_current(batch: &RecordBatch) -> Result<RecordBatch> {
-    if let Some(m) = pairs_schema_mismatch(&batch.schema()) {
-        return Err(Error::Parquet(format!("not a pairs batch: {m}")));
-    }
-    if is_v1(batch) {
-        upgrade(batch)
-    } else {
-        Ok(batch.clone())
+    match pairs_version_of(&batch.schema()) {
+        Ok(SCHEMA_VERSION_1) => upgrade(batch),
+        Ok(_) => Ok(batch.clone()),
+        Err(m) => Err(Error::Parquet(format!("not a pairs batch: {m}"))),
     }
 }
 

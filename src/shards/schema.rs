@@ -159,15 +159,29 @@ pub fn type_notation(data_type: &DataType) -> String {
     }
 }
 
-/// The first difference between `found` and the pairs schema of its own recorded version (metadata
-/// `schema_version`; a file without one is compared with the current version), or `None` when the fields
-/// match in names, order, types and nullability.
-pub fn pairs_schema_mismatch(found: &Schema) -> Option<String> {
-    let version = found.metadata().get(SCHEMA_VERSION_KEY).map(String::as_str).unwrap_or(SCHEMA_VERSION);
-    match pairs_schema_of(version) {
-        Some(expected) => fields_mismatch(expected.fields(), found.fields()).map(|m| format!("{version}: {m}")),
-        None => Some(format!("unknown pairs schema version {version:?} (this code reads {SCHEMA_VERSION_1} and {SCHEMA_VERSION})")),
+/// The pairs schema version `found` is: the version its metadata records (`schema_version`), checked
+/// against that version's fields; without the metadata (a batch a reader rebuilt), whichever version's
+/// fields it has. The error is the first difference, naming the column.
+pub fn pairs_version_of(found: &Schema) -> std::result::Result<&'static str, String> {
+    let check = |version: &'static str| -> std::result::Result<&'static str, String> {
+        let expected = pairs_schema_of(version).expect("a known version");
+        match fields_mismatch(expected.fields(), found.fields()) {
+            None => Ok(version),
+            Some(m) => Err(format!("{version}: {m}")),
+        }
+    };
+    match found.metadata().get(SCHEMA_VERSION_KEY).map(String::as_str) {
+        Some(SCHEMA_VERSION) => check(SCHEMA_VERSION),
+        Some(SCHEMA_VERSION_1) => check(SCHEMA_VERSION_1),
+        Some(other) => Err(format!("unknown pairs schema version {other:?} (this code reads {SCHEMA_VERSION_1} and {SCHEMA_VERSION})")),
+        None => check(SCHEMA_VERSION).or_else(|e| check(SCHEMA_VERSION_1).map_err(|_| e)),
     }
+}
+
+/// The first difference between `found` and the pairs schema of its version ([`pairs_version_of`]), or
+/// `None` when the fields match in names, order, types and nullability.
+pub fn pairs_schema_mismatch(found: &Schema) -> Option<String> {
+    pairs_version_of(found).err()
 }
 
 /// The first difference between two field lists, naming the column.

@@ -6,7 +6,7 @@
 //! scored; an interrupted training resumes from its last checkpoint. The training settings are recorded
 //! in `<out>/boost-settings.json` by the first run, and a rerun with other ones is refused.
 
-use super::conditions::{comparisons, Condition, Generator};
+use super::conditions::{comparisons, Condition};
 pub use super::config::BoostConfig;
 use super::draw::{build_pools, condition_pairs, draw, TrainingData};
 use super::scores_file;
@@ -15,10 +15,8 @@ use super::table::{format_csv, format_paired_csv, format_text, summarize};
 use crate::atomic::{write_atomic, Publish};
 use crate::error::{Error, Result};
 use crate::export::rows::sanitize;
-use crate::pipeline::BuildConfig;
 use crate::registration::benchmark::{find_benchmarks, Benchmark};
 use crate::registration::{evaluate, Descriptor, EvalConfig, PairScore};
-use crate::rng::Rng;
 use crate::training::descriptor::data::TrainPair;
 use crate::training::descriptor::train::{train_descriptor, DescriptorTrainOptions, LATEST};
 use std::collections::BTreeMap;

@@ -1,16 +1,12 @@
 //! The augmentation registration trainers apply each time a pair is drawn (GeoTransformer's and PREDATOR's
-//! 3DMatch loaders: Gaussian noise on the points, a random rotation), and the known-point rules of
-//! generated pairs: positives only on re-projected target points, filled target points dropped.
+//! 3DMatch loaders: Gaussian noise on the points, a random rotation), and dropping the filled target
+//! points of generated pairs (the positives rule is [`super::data::may_be_positive`]).
 
-use super::data::TrainPair;
+use super::data::{TrainPair, KNOWN_MIN_SHARE};
 use crate::geometry::Point;
 use crate::rng::Rng;
 use nalgebra::{Isometry3, Translation3, Unit, UnitQuaternion, Vector3};
 use serde::Serialize;
-
-/// A target point of a generated pair counts as re-projected (known) when at least this share of its
-/// voxel's points were (`target_known_share`), filled otherwise.
-pub const KNOWN_MIN_SHARE: f32 = 0.5;
 
 /// How a pair is perturbed each time a training step draws it.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
@@ -76,12 +72,6 @@ impl Augment {
     }
 }
 
-/// Whether target point `k` of `pair` may be a positive under `known_only`: every point of a real pair,
-/// and the re-projected ones of a generated pair.
-pub fn may_be_positive(pair: &TrainPair, k: usize, known_only: bool) -> bool {
-    !known_only || pair.target_known.get(k).is_none_or(|&s| s >= KNOWN_MIN_SHARE)
-}
-
 /// `pair` without its filled target points (those whose known share is below [`KNOWN_MIN_SHARE`]), so
 /// they appear in no local frame, patch or feature; a pair without provenance is unchanged.
 pub fn drop_filled(pair: &TrainPair) -> TrainPair {
@@ -133,11 +123,9 @@ mod tests {
     }
 
     #[test]
-    fn known_rules() {
+    fn dropping_filled_points() {
         let p = pair();
-        assert!(!may_be_positive(&p, 0, true) && may_be_positive(&p, 0, false) && may_be_positive(&p, 1, true));
         let real = TrainPair { target_known: Vec::new(), real: true, ..p.clone() };
-        assert!(may_be_positive(&real, 0, true));
         let d = drop_filled(&p);
         assert_eq!(d.target.len(), 3000);
         assert!(d.target_known.iter().all(|&s| s >= KNOWN_MIN_SHARE));

@@ -3,7 +3,6 @@
 //! poses, e.g. `pointreggpt fragments --single-frames` of the training frames), and corresponding points
 //! drawn from them.
 
-use super::augment::may_be_positive;
 use crate::error::{Error, Result};
 use crate::geometry::{pose_from_rows, voxel_downsample, Point, RadiusIndex};
 use crate::registration::benchmark::find_benchmarks;
@@ -77,6 +76,16 @@ pub fn limit_generated(pairs: Vec<TrainPair>, ratio: f64, seed: u64) -> Result<V
     let mut picked: std::collections::HashSet<usize> =
         crate::registration::evaluate::sample_indices(generated.len(), keep, &mut Rng::new(seed).fork(0x6E4)).into_iter().map(|k| generated[k]).collect();
     Ok(pairs.into_iter().enumerate().filter(|(i, p)| p.real || picked.remove(i)).map(|(_, p)| p).collect())
+}
+
+/// A target point of a generated pair counts as re-projected (known) when at least this share of its
+/// voxel's points were (`target_known_share`), filled otherwise.
+pub const KNOWN_MIN_SHARE: f32 = 0.5;
+
+/// Whether target point `k` of `pair` may be a positive under `known_only`: every point of a real pair,
+/// and the re-projected ones of a generated pair.
+pub fn may_be_positive(pair: &TrainPair, k: usize, known_only: bool) -> bool {
+    !known_only || pair.target_known.get(k).is_none_or(|&s| s >= KNOWN_MIN_SHARE)
 }
 
 /// The pairs of the benchmark folder `root`: source = cloud j, target = cloud i, pose = gt.log's
@@ -153,6 +162,8 @@ mod tests {
 
     #[test]
     fn known_only_positives_never_land_on_filled_points() {
+        let real_point = TrainPair { key: "r".into(), source: vec![], target: vec![Point::origin()], target_known: vec![], real: true, t_target_from_source: Isometry3::identity() };
+        assert!(may_be_positive(&real_point, 0, true), "every point of a real pair");
         let mut rng = Rng::new(5);
         let source: Vec<Point> = (0..3000).map(|_| Point::new(rng.uniform() as f32, rng.uniform() as f32, 2.0)).collect();
         let t = Isometry3::from_parts(Translation3::new(0.05, 0.0, 0.1), UnitQuaternion::identity());
