@@ -403,6 +403,16 @@ fn a_store_that_fails_for_a_few_seconds_mid_build_is_retried_and_the_build_compl
     let moto = &w.moto;
     let (config, _, reference) = w.reference_build(synthetic_config(2, 40, 2, 1, 320, 240, 2));
     let total = reference.len().div_ceil(2);
+    // A store that never answers but 503: a command retries for the whole window it is given
+    // (POINTREGGPT_STORE_RETRY_SECONDS, 10 s here), then fails naming the URL; waits are capped at 5 s.
+    let failing = HttpProxy::start(moto.port);
+    failing.set_failing(true);
+    let t = Instant::now();
+    let o = run(&failing.endpoint(), &["verify", "s3://outage/nothing"]).env("POINTREGGPT_STORE_RETRY_SECONDS", "10").output().unwrap();
+    let (took, err) = (t.elapsed().as_secs_f64(), String::from_utf8_lossy(&o.stderr));
+    eprintln!("a store down for good: failed after {took:.1} s and {} requests: {}", failing.refused.load(Ordering::SeqCst), err.trim());
+    assert!(!o.status.success() && err.contains("s3://outage/nothing") && err.contains("503"), "{err}");
+    assert!((10.0..18.0).contains(&took), "gave up after {took:.1} s, not after the 10 s retry window: {err}");
     // Retry the setup when the outage did not hit a running build (it finished first, or sent no
     // request while the proxy failed); each attempt builds into a fresh prefix.
     for attempt in 0..3 {
@@ -416,11 +426,12 @@ fn a_store_that_fails_for_a_few_seconds_mid_build_is_retried_and_the_build_compl
             assert!(t0.elapsed() < Duration::from_secs(120), "no shard committed in 2 minutes");
             std::thread::sleep(Duration::from_millis(5));
         }
-        // Every request fails with 503 for 4 s.
+        // Every request fails with 503 for 8 s. (object_store's own retry settings, 10 retries with a
+        // backoff that does not grow, gave up after 1.7-5.5 s in 80 % of draws, 8 s in 4 %.)
         proxy.set_failing(true);
         let committed_at_start = manifest_objects();
         let running_at_start = child.try_wait().unwrap().is_none();
-        std::thread::sleep(Duration::from_secs(4));
+        std::thread::sleep(Duration::from_secs(8));
         let running_at_end = child.try_wait().unwrap().is_none();
         let committed_at_end = manifest_objects();
         proxy.set_failing(false);
