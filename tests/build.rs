@@ -16,7 +16,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 use std::process::Stdio;
 use std::time::Duration;
-use support::{bin, python, synthetic_config};
+use support::{bin, synthetic_config};
 
 /// unit index → content digest of every committed row.
 fn digests(dataset: &Path) -> BTreeMap<u64, String> {
@@ -365,7 +365,7 @@ fn pyarrow_and_duckdb_agree_with_the_counts_the_build_printed() {
         })
         .collect();
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python/read_shards.py");
-    let py = std::process::Command::new(python()).arg(&script).arg(&out).output().unwrap();
+    let py = support::python_command().arg(&script).arg(&out).output().unwrap();
     assert!(py.status.success(), "run scripts/install-test-deps.sh: {}", String::from_utf8_lossy(&py.stderr));
     let v: serde_json::Value = serde_json::from_slice(&py.stdout).unwrap();
     for reader in ["pyarrow", "duckdb"] {

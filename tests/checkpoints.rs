@@ -16,7 +16,7 @@ use pointreggpt::atomic::TempName;
 use safetensors::tensor::{Dtype, SafeTensors};
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
 use std::sync::OnceLock;
 use support::python;
 use tch::{Device, Kind, Tensor};
@@ -153,7 +153,7 @@ fn repo(rel: &str) -> PathBuf {
 }
 
 fn run_python(args: &[&Path]) -> Output {
-    Command::new(python()).args(args).output().unwrap()
+    support::python_command().args(args).output().unwrap()
 }
 
 fn stderr(o: &Output) -> String {
@@ -164,7 +164,7 @@ fn stderr(o: &Output) -> String {
 fn fixture() -> &'static Path {
     static DIR: OnceLock<PathBuf> = OnceLock::new();
     DIR.get_or_init(|| {
-        let ok = Command::new(python()).args(["-c", "import torch, safetensors"]).status().is_ok_and(|s| s.success());
+        let ok = support::python_command().args(["-c", "import torch, safetensors"]).status().is_ok_and(|s| s.success());
         assert!(ok, "{} cannot import torch and safetensors, which these tests need: run scripts/install-test-deps.sh", python());
         let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("convert-fixture");
         let _ = std::fs::remove_dir_all(&dir);
@@ -175,7 +175,7 @@ fn fixture() -> &'static Path {
 }
 
 fn convert(kind: &str, src: &Path, dst: &Path) -> Output {
-    Command::new(python()).arg(repo("scripts/convert-official.py")).arg(kind).arg(src).arg(dst).output().unwrap()
+    support::python_command().arg(repo("scripts/convert-official.py")).arg(kind).arg(src).arg(dst).output().unwrap()
 }
 
 /// The fixture's original weights under `prefix`, read by tch (not by our reader).

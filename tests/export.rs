@@ -19,7 +19,7 @@ use pointreggpt::shards::row::{PairRow, Status};
 use serde_json::json;
 use std::path::{Path, PathBuf};
 use pointreggpt::ply::read_ply;
-use support::{bin, python, synthetic_config};
+use support::{bin, synthetic_config};
 
 /// 2 scenes × 4 frames, one sample each, shards of 4; `min_overlap = 0.6` rejects some pairs, so the
 /// dataset holds `ok` and `low_overlap` rows.
@@ -114,7 +114,7 @@ fn every_format_reads_back_and_agrees_with_the_rows() {
     });
     let plan_path = dir.path().join("plan.json");
     std::fs::write(&plan_path, plan.to_string()).unwrap();
-    let o = std::process::Command::new(python()).arg(script("check_exports.py")).arg(&ds).arg(&plan_path).output().unwrap();
+    let o = support::python_command().arg(script("check_exports.py")).arg(&ds).arg(&plan_path).output().unwrap();
     assert!(o.status.success(), "check_exports.py failed (numpy and pyarrow are required: scripts/install-test-deps.sh):\n{}", String::from_utf8_lossy(&o.stderr));
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(v["pointreggpt"]["scenes"], ok.len());
@@ -125,7 +125,7 @@ fn every_format_reads_back_and_agrees_with_the_rows() {
 
 /// DuckDB's rows for each query, over the same committed shard files (tests/python/duckdb_query.py).
 fn duckdb(ds: &Path, queries: &[String]) -> Vec<serde_json::Value> {
-    let o = std::process::Command::new(python()).arg(script("duckdb_query.py")).arg(ds).args(queries).output().unwrap();
+    let o = support::python_command().arg(script("duckdb_query.py")).arg(ds).args(queries).output().unwrap();
     assert!(o.status.success(), "duckdb_query.py failed (duckdb is required: scripts/install-test-deps.sh):\n{}", String::from_utf8_lossy(&o.stderr));
     String::from_utf8(o.stdout).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect()
 }
@@ -341,7 +341,7 @@ fn pair_dataset_py_reads_only_the_committed_shards() {
         .collect();
     let path = dir.path().join("expected.json");
     std::fs::write(&path, serde_json::Value::Array(expected.clone()).to_string()).unwrap();
-    let o = std::process::Command::new(python()).arg(script("pair_dataset.py")).arg(&ds).arg(&path).output().unwrap();
+    let o = support::python_command().arg(script("pair_dataset.py")).arg(&ds).arg(&path).output().unwrap();
     assert!(o.status.success(), "pair_dataset.py failed (numpy and pyarrow are required: scripts/install-test-deps.sh):\n{}", String::from_utf8_lossy(&o.stderr));
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(v["pairs"], expected.len());

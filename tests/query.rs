@@ -5,7 +5,7 @@ mod support;
 use pointreggpt::pipeline::{run_build, BuildConfig, BuildOptions};
 use pointreggpt::runtime::CancelToken;
 use std::path::Path;
-use support::{bin, python, synthetic_config};
+use support::{bin, synthetic_config};
 
 fn dataset(dir: &Path) -> std::path::PathBuf {
     let text = synthetic_config(2, 16, 2, 1, 320, 240, 3) + "[validate]\nmin_overlap = 0.6\n";
@@ -48,7 +48,7 @@ fn query_answers_match_duckdb_on_the_same_files() {
         "select pair_key, pose_draws, sample_index from pairs order by unit_index limit 5",
     ];
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python/duckdb_query.py");
-    let py = std::process::Command::new(python()).arg(&script).arg(&ds).args(queries).output().unwrap();
+    let py = support::python_command().arg(&script).arg(&ds).args(queries).output().unwrap();
     assert!(py.status.success(), "run scripts/install-test-deps.sh: {}", String::from_utf8_lossy(&py.stderr));
     let theirs: Vec<Vec<Vec<serde_json::Value>>> =
         String::from_utf8(py.stdout).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect();
@@ -173,7 +173,7 @@ fn nan_inf_null_lists_and_binary_in_every_text_format() {
     };
     let (json, csv, table) = (write("json"), write("csv"), write("table"));
 
-    let mut check = std::process::Command::new(python());
+    let mut check = support::python_command();
     let py = check.arg("-c").arg(CHECK_FORMATS_PY).arg(&ds).args([&json, &csv]).output().unwrap();
     assert!(py.status.success(), "run scripts/install-test-deps.sh: {}", String::from_utf8_lossy(&py.stderr));
     assert_eq!(String::from_utf8_lossy(&py.stdout).trim(), "ok 5");

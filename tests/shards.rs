@@ -2,13 +2,14 @@
 //! back by the library and by two independent readers, pyarrow and DuckDB (`tests/python/read_shards.py`),
 //! whose counts and sums are compared with values computed from the rows written.
 
+mod support;
+
 use pointreggpt::geometry::Point;
 use pointreggpt::shards::{
     pairs_schema, pairs_to_batch, write_parquet_bytes, Dataset, PairRow, StageTiming, Status, CODE_VERSION, PAIRS_TABLE,
 };
 use std::collections::BTreeMap;
 use std::path::Path;
-use std::process::Command;
 
 const CONFIG: &str = "seed = 11\nshard_size = 7\n[overlap]\nradius = 0.0375\n";
 const CONFIG_HASH: &str = "9f2c0e";
@@ -144,13 +145,9 @@ fn expected(rows: &[PairRow]) -> serde_json::Value {
     })
 }
 
-fn python() -> String {
-    std::env::var("PYTHON").unwrap_or_else(|_| "python3".into())
-}
-
 /// Fails (does not skip) when pyarrow or DuckDB is missing.
 fn require_python_modules() {
-    let ok = Command::new(python())
+    let ok = support::python_command()
         .args(["-c", "import pyarrow, duckdb"])
         .output()
         .map(|o| o.status.success())
@@ -159,7 +156,7 @@ fn require_python_modules() {
         ok,
         "`{} -c 'import pyarrow, duckdb'` failed: run scripts/install-test-deps.sh (installs the pinned pyarrow \
          and duckdb this test reads the shards with)",
-        python()
+        support::python()
     );
 }
 
@@ -169,7 +166,7 @@ fn pyarrow_and_duckdb_read_the_committed_shards() {
     let dir = tempfile::tempdir().unwrap();
     let rows = write_dataset(dir.path());
     let script = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/python/read_shards.py");
-    let out = Command::new(python()).arg(script).arg(dir.path()).output().unwrap();
+    let out = support::python_command().arg(script).arg(dir.path()).output().unwrap();
     assert!(out.status.success(), "read_shards.py failed:\n{}", String::from_utf8_lossy(&out.stderr));
     let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(

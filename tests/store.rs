@@ -14,7 +14,7 @@ use std::time::{Duration, Instant};
 use std::path::PathBuf;
 use std::sync::MutexGuard;
 use support::store::{Moto, Proxy, ENV};
-use support::{bin, python, synthetic_config, synthetic_labels_config};
+use support::{bin, synthetic_config, synthetic_labels_config};
 
 /// One test's S3 world: a moto server with one bucket and a temporary folder, under the lock of the
 /// process environment (the tests point the AWS variables at their own server).
@@ -71,7 +71,7 @@ fn ok(o: Output) -> String {
 /// A Python peer from tests/python/s3_peer.py.
 fn peer(endpoint: &str, args: &[&str]) -> String {
     let script = format!("{}/tests/python/s3_peer.py", env!("CARGO_MANIFEST_DIR"));
-    let o = Command::new(python()).arg(script).args(args).envs(Moto::vars(endpoint)).output().unwrap();
+    let o = support::python_command().arg(script).args(args).envs(Moto::vars(endpoint)).output().unwrap();
     assert!(o.status.success(), "s3_peer.py {args:?}: {}", String::from_utf8_lossy(&o.stderr));
     String::from_utf8_lossy(&o.stdout).trim().to_string()
 }
@@ -133,10 +133,28 @@ fn a_build_on_s3_equals_the_build_in_a_folder_and_queries_and_pyarrow_agree() {
         let v = &from_s3[&r.pair_key];
         assert_eq!((v[0].as_str().unwrap(), v[2].as_u64().unwrap() as usize), (r.status.as_str(), r.source_points.len()));
     }
-    // export and stats read the store too.
+    // export, stats and preview read the store too: the files they write from the URL are the files
+    // they write from the folder, byte for byte.
     let out = w.dir.path().join("ply");
     let said = ok(run(&moto.endpoint(), &["export", url, "--format", "ply", "--out", out.to_str().unwrap(), "--limit", "2", "--no-progress"]).output().unwrap());
     assert!(said.contains("wrote 2 pairs"), "{said}");
+    for (command, extra, expect) in [("stats", vec!["--per-scene"], 2), ("preview", vec!["--limit", "3"], 3)] {
+        let outputs: Vec<BTreeMap<String, Vec<u8>>> = [local.to_str().unwrap(), url]
+            .into_iter()
+            .enumerate()
+            .map(|(k, dataset)| {
+                let out = w.dir.path().join(format!("{command}-{k}"));
+                ok(run(&moto.endpoint(), &[&[command, dataset, "--out", out.to_str().unwrap(), "--no-progress"], &extra[..]].concat()).output().unwrap());
+                std::fs::read_dir(&out).unwrap().map(|e| e.unwrap().path()).map(|p| (p.file_name().unwrap().to_string_lossy().into_owned(), std::fs::read(&p).unwrap())).collect()
+            })
+            .collect();
+        assert_eq!(outputs[0].len(), expect, "{command}: {:?}", outputs[0].keys());
+        assert!(outputs[0].values().all(|b| b.len() > 100), "{command}: an empty file");
+        assert_eq!(outputs[1].keys().collect::<Vec<_>>(), outputs[0].keys().collect::<Vec<_>>(), "{command}: other files from the URL");
+        for (name, bytes) in &outputs[0] {
+            assert!(outputs[1][name] == *bytes, "{command}: {name} differs between the folder and the URL");
+        }
+    }
     assert_clean(&moto.endpoint(), "data", "runs/demo");
 }
 
@@ -235,27 +253,64 @@ fn two_writers_racing_on_the_same_shards_leave_one_object_per_shard() {
     assert!(ds.verify().unwrap().is_ok());
 }
 
+/// A 3DMatch-layout folder of three synthetic frames whose first depth PNG is truncated, and a build
+/// config reading it: with `--strict`, a build that starts work stops at that frame, naming it. A
+/// command refused "before any work" never reads it, so its error names the store instead.
+fn strict_trap(dir: &Path) -> PathBuf {
+    use pointreggpt::sources::synthetic::{SyntheticConfig, SyntheticSequence};
+    let data = dir.join("frames");
+    SyntheticSequence::generate(&SyntheticConfig { frames: 3, ..Default::default() }, 5).unwrap().write_3dmatch(&data).unwrap();
+    let png = data.join("frame-000000.depth.png");
+    let bytes = std::fs::read(&png).unwrap();
+    std::fs::write(&png, &bytes[..bytes.len() / 4]).unwrap();
+    let config = dir.join("strict.toml");
+    std::fs::write(&config, format!("shard_size = 1\n[source]\nkind = \"directory\"\npath = \"{}\"\n", data.display())).unwrap();
+    config
+}
+
 #[test]
 fn bad_urls_fail_clearly_before_any_work() {
     let w = World::new("present");
     let moto = &w.moto;
     let config = w.dir.path().join("c.toml");
     std::fs::write(&config, synthetic_config(1, 4, 2, 1, 160, 120, 2)).unwrap();
+    let trap = strict_trap(w.dir.path());
+    // The trap works: on a reachable store the strict build fails on the truncated frame.
+    let o = build(&moto.endpoint(), &trap, "s3://present/probe").arg("--strict").output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("frame-000000.depth.png"), "the strict build did not stop at the bad frame: {err}");
+    peer(&moto.endpoint(), &["delete", &moto.endpoint(), "present", "probe/dataset.toml"]);
+    assert_eq!(peer(&moto.endpoint(), &["keys", &moto.endpoint(), "present"]), "[]", "the probe left objects");
+
+    // Each bad URL: the command fails naming the URL and the reason, without reading any frame (the
+    // strict build would stop at the truncated one), without writing any object or upload to the
+    // server, without creating a bucket, and without leaving anything in its working folder.
     let fails = |endpoint: &str, extra: &[(&str, &str)], out: &str, wants: &[&str]| {
         let t = Instant::now();
-        let o = build(endpoint, &config, out).envs(extra.iter().copied()).output().unwrap();
+        let cwd = tempfile::tempdir().unwrap();
+        let o = build(endpoint, &trap, out).arg("--strict").envs(extra.iter().copied()).current_dir(cwd.path()).output().unwrap();
         let err = String::from_utf8_lossy(&o.stderr);
         assert!(!o.status.success(), "{out}: {err}");
-        assert!(!String::from_utf8_lossy(&o.stdout).contains("units in"), "{out}: the build started");
+        assert!(!err.contains("depth.png"), "{out}: the build read a frame before failing: {err}");
         for w in wants {
             assert!(err.contains(w), "{out}: `{w}` not in: {err}");
         }
+        let left: Vec<_> = std::fs::read_dir(cwd.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
+        assert!(left.is_empty(), "{out}: left {left:?} in the working folder");
         eprintln!("{out}: failed in {:.1} s: {}", t.elapsed().as_secs_f64(), err.trim());
     };
+    let nothing_written = |what: &str| {
+        assert_eq!(peer(&moto.endpoint(), &["keys", &moto.endpoint(), "present"]), "[]", "{what}: objects were written");
+        assert_eq!(peer(&moto.endpoint(), &["uploads", &moto.endpoint(), "present"]), "0", "{what}: an upload was started");
+        assert_eq!(peer(&moto.endpoint(), &["buckets", &moto.endpoint()]), r#"["present"]"#, "{what}: a bucket was created");
+    };
     fails(&moto.endpoint(), &[], "ftp://host/data", &["ftp://host/data", "unknown URL scheme", "s3://"]);
+    nothing_written("ftp://host/data");
     fails(&moto.endpoint(), &[], "s3://missing-bucket/ds", &["s3://missing-bucket/ds", "does the bucket exist"]);
+    nothing_written("s3://missing-bucket/ds");
     let closed = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
     fails(&format!("http://127.0.0.1:{closed}"), &[], "s3://present/ds", &["s3://present/ds", "cannot reach the store"]);
+    nothing_written("an unreachable endpoint");
     // A profile in the AWS files (no key, no endpoint in the environment): its endpoint_url can only come
     // from the config file, so the build reaching moto shows the files were read.
     let (creds, conf) = (w.dir.path().join("credentials"), w.dir.path().join("config"));
@@ -275,6 +330,41 @@ fn bad_urls_fail_clearly_before_any_work() {
     // Wrong credentials: with moto's authentication on, a key IAM never made is refused.
     moto.require_auth();
     fails(&moto.endpoint(), &[("AWS_ACCESS_KEY_ID", "AKIAIOSFODNN7EXAMPLE")], "s3://present/ds", &["s3://present/ds", "InvalidAccessKeyId", "credentials were refused"]);
+    moto.end_auth();
+    assert_eq!(objects(&moto.endpoint(), "present", "ds").len(), 0, "refused credentials: objects were written");
+    assert_eq!(peer(&moto.endpoint(), &["uploads", &moto.endpoint(), "present"]), "0", "refused credentials: an upload was started");
+}
+
+#[test]
+fn without_credentials_and_with_the_metadata_service_off_no_metadata_address_is_asked() {
+    use support::store::MetadataTrap;
+    let w = World::new("creds");
+    let moto = &w.moto;
+    let config = w.dir.path().join("c.toml");
+    std::fs::write(&config, synthetic_config(1, 4, 2, 1, 160, 120, 2)).unwrap();
+    let trap = MetadataTrap::start();
+    // No key and no profile: the client's last resort is the instance metadata service, here the trap.
+    let attempt = |metadata_disabled: &str| {
+        let o = build(&moto.endpoint(), &config, "s3://creds/ds")
+            .env_remove("AWS_ACCESS_KEY_ID")
+            .env_remove("AWS_SECRET_ACCESS_KEY")
+            .env("AWS_METADATA_ENDPOINT", trap.endpoint())
+            .env("AWS_EC2_METADATA_DISABLED", metadata_disabled)
+            .output()
+            .unwrap();
+        (o.status.success(), String::from_utf8_lossy(&o.stderr).into_owned())
+    };
+    // The control: with the service allowed, the client asks the trap (so the trap would see it).
+    let (done, err) = attempt("false");
+    assert!(!done && trap.calls() > 0, "the client never asked the metadata address ({} calls): {err}", trap.calls());
+    let before = trap.calls();
+    // The tests' setting (support::ISOLATED_AWS): the command fails naming the URL and the cause,
+    // and never calls the metadata address.
+    let (done, err) = attempt("true");
+    assert!(!done, "a build without credentials succeeded");
+    assert_eq!(trap.calls(), before, "the metadata address was asked although AWS_EC2_METADATA_DISABLED=true: {err}");
+    assert!(err.contains("s3://creds/ds") && err.contains("no AWS credentials") && err.contains("AWS_EC2_METADATA_DISABLED"), "{err}");
+    assert_eq!(peer(&moto.endpoint(), &["keys", &moto.endpoint(), "creds"]), "[]");
 }
 
 #[test]
@@ -303,6 +393,161 @@ fn a_store_that_goes_away_mid_build_keeps_every_committed_shard_and_the_build_fa
     ok(build(&moto.endpoint(), &config, url).output().unwrap());
     assert_eq!(digests(url), reference);
     assert_clean(&moto.endpoint(), "flaky", "ds");
+}
+
+#[test]
+fn a_store_that_fails_for_a_few_seconds_mid_build_is_retried_and_the_build_completes() {
+    use std::sync::atomic::Ordering;
+    use support::store::HttpProxy;
+    let w = World::new("outage");
+    let moto = &w.moto;
+    let (config, _, reference) = w.reference_build(synthetic_config(2, 40, 2, 1, 320, 240, 2));
+    let total = reference.len().div_ceil(2);
+    // A store that never answers but 503: a command retries for the whole window it is given
+    // (POINTREGGPT_STORE_RETRY_SECONDS, 10 s here), then fails naming the URL; waits are capped at 5 s.
+    let failing = HttpProxy::start(moto.port);
+    failing.set_failing(true);
+    let t = Instant::now();
+    let o = run(&failing.endpoint(), &["verify", "s3://outage/nothing"]).env("POINTREGGPT_STORE_RETRY_SECONDS", "10").output().unwrap();
+    let (took, err) = (t.elapsed().as_secs_f64(), String::from_utf8_lossy(&o.stderr));
+    eprintln!("a store down for good: failed after {took:.1} s and {} requests: {}", failing.refused.load(Ordering::SeqCst), err.trim());
+    assert!(!o.status.success() && err.contains("s3://outage/nothing") && err.contains("503"), "{err}");
+    assert!((10.0..18.0).contains(&took), "gave up after {took:.1} s, not after the 10 s retry window: {err}");
+    // Retry the setup when the outage did not hit a running build (it finished first, or sent no
+    // request while the proxy failed); each attempt builds into a fresh prefix.
+    for attempt in 0..3 {
+        let url = format!("s3://outage/ds{attempt}");
+        let proxy = HttpProxy::start(moto.port);
+        let manifest_objects = manifest_counter(&url);
+        // The README's default retry window (30 s): no POINTREGGPT_STORE_RETRY_SECONDS.
+        let mut child = build(&proxy.endpoint(), &config, &url).env_remove("POINTREGGPT_STORE_RETRY_SECONDS").spawn().unwrap();
+        let t0 = Instant::now();
+        while manifest_objects() < 2 && child.try_wait().unwrap().is_none() {
+            assert!(t0.elapsed() < Duration::from_secs(120), "no shard committed in 2 minutes");
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        // Every request fails with 503 for 8 s. (object_store's own retry settings, 10 retries with a
+        // backoff that does not grow, gave up after 1.7-5.5 s in 80 % of draws, 8 s in 4 %.)
+        proxy.set_failing(true);
+        let committed_at_start = manifest_objects();
+        let running_at_start = child.try_wait().unwrap().is_none();
+        std::thread::sleep(Duration::from_secs(8));
+        let running_at_end = child.try_wait().unwrap().is_none();
+        let committed_at_end = manifest_objects();
+        proxy.set_failing(false);
+        let refused = proxy.refused.load(Ordering::SeqCst);
+        let o = child.wait_with_output().unwrap();
+        let hit = running_at_start && running_at_end && refused > 0 && committed_at_start < total;
+        eprintln!(
+            "attempt {attempt}: {refused} requests refused during the outage, {committed_at_start} -> {committed_at_end} of {total} \
+             shards committed across it, running at its start {running_at_start} and end {running_at_end}"
+        );
+        if !hit {
+            ok(o);
+            continue;
+        }
+        let out = ok(o);
+        assert!(out.contains(&format!("{total} committed now")), "{out}");
+        assert_eq!(digests(&url), reference, "the build that rode out the outage equals the uninterrupted one");
+        assert!(proxy.forwarded.load(Ordering::SeqCst) > refused, "requests went through after the outage");
+        assert_clean(&moto.endpoint(), "outage", &format!("ds{attempt}"));
+        return;
+    }
+    panic!("in 3 attempts the outage never hit a running build");
+}
+
+#[test]
+fn repair_leaves_live_writers_alone_and_removes_stale_records_and_planted_orphans() {
+    use pointreggpt::atomic::hostname;
+    let w = World::new("repair");
+    let moto = &w.moto;
+    let e = moto.endpoint();
+    let config = w.dir.path().join("c.toml");
+    std::fs::write(&config, synthetic_config(1, 8, 2, 1, 160, 120, 1)).unwrap();
+    let url = "s3://repair/ds";
+    ok(build(&e, &config, url).output().unwrap());
+    let committed = digests(url);
+    assert_eq!(committed.len(), 4);
+    let before = objects(&e, "repair", "ds");
+    let shard = before.keys().find(|k| k.starts_with("shards/")).unwrap().clone();
+    let put = |key: &str, text: &str| {
+        let file = w.dir.path().join("body");
+        std::fs::write(&file, text).unwrap();
+        peer(&e, &["put", &e, "repair", &format!("ds/{key}"), file.to_str().unwrap()]);
+    };
+    let record = |object: &str, upload: Option<&str>| serde_json::json!({ "object": object, "upload_id": upload }).to_string();
+    let copy = |object: &str| peer(&e, &["copy", &e, "repair", &format!("ds/{shard}"), &format!("ds/shards/{object}")]);
+
+    // A live writer on this host (a process that runs: `sleep`): one upload mid multipart, one whole
+    // object put but not yet committed. Both have their records.
+    struct Running(std::process::Child);
+    impl Drop for Running {
+        fn drop(&mut self) {
+            let _ = self.0.kill();
+            let _ = self.0.wait();
+        }
+    }
+    let mut writer = Running(support::command("sleep").arg("600").spawn().unwrap());
+    let (host, pid) = (hostname(), writer.0.id());
+    let live_multipart = "pairs-000005-1111111111111111.parquet";
+    let live_multipart_record = format!("{host}~{pid}~{live_multipart}~1.tmp");
+    peer(&e, &["abandon", &e, "repair", "ds", &live_multipart_record, live_multipart]);
+    let live_put = "pairs-000006-2222222222222222.parquet";
+    let live_put_record = format!("{host}~{pid}~{live_put}~2.tmp");
+    put(&format!(".tmp/{live_put_record}"), &record(live_put, None));
+    copy(live_put);
+    // A writer of another host: its record is not stale from here (for an hour).
+    let remote = "pairs-000007-3333333333333333.parquet";
+    let remote_record = format!("elsewhere.example~{pid}~{remote}~3.tmp");
+    put(&format!(".tmp/{remote_record}"), &record(remote, None));
+    copy(remote);
+    // A writer of this host that died (a pid that never runs) after putting its object: stale.
+    let dead = "pairs-000001-4444444444444444.parquet";
+    let dead_record = format!("{host}~{}~{dead}~4.tmp", 4_194_304 + 9);
+    put(&format!(".tmp/{dead_record}"), &record(dead, None));
+    copy(dead);
+    // A completed object no record and no entry names (a writer that lost a race and could not delete
+    // its object): a planted orphan, a whole valid shard.
+    let orphan = "pairs-000002-5555555555555555.parquet";
+    copy(orphan);
+    assert_eq!(peer(&e, &["uploads", &e, "repair"]), "1");
+
+    let report = ok(run(&e, &["verify", url]).output().unwrap());
+    for (name, says) in [
+        (dead_record.as_str(), "stale temporary file"),
+        (live_multipart_record.as_str(), "temporary file of a running or remote process"),
+        (live_put_record.as_str(), "temporary file of a running or remote process"),
+        (remote_record.as_str(), "temporary file of a running or remote process"),
+        (orphan, "uncommitted shard file"),
+    ] {
+        assert!(report.lines().any(|l| l.contains(name) && l.contains(says)), "verify does not list {name} as {says}:\n{report}");
+    }
+    let repaired = ok(run(&e, &["verify", "--repair", url]).output().unwrap());
+    let after = objects(&e, "repair", "ds");
+    let has = |key: &str| after.contains_key(key);
+    // The live writer's upload, object and records are untouched, and so is the remote writer's.
+    assert_eq!(peer(&e, &["uploads", &e, "repair"]), "1", "repair aborted a live writer's multipart upload:\n{repaired}");
+    for key in [format!(".tmp/{live_multipart_record}"), format!(".tmp/{live_put_record}"), format!("shards/{live_put}"), format!(".tmp/{remote_record}"), format!("shards/{remote}")] {
+        assert!(has(&key), "repair removed {key} of a running writer:\n{repaired}");
+    }
+    // The dead writer's record and object, and the planted orphan, are gone.
+    for key in [format!(".tmp/{dead_record}"), format!("shards/{dead}"), format!("shards/{orphan}")] {
+        assert!(!has(&key), "repair left {key}:\n{repaired}");
+    }
+    // Committed data untouched: every object that was there before, the same bytes (ETag).
+    for (key, v) in &before {
+        assert_eq!(after.get(key), Some(v), "repair changed the committed object {key}");
+    }
+    assert_eq!(digests(url), committed);
+    assert!(Dataset::open(url).unwrap().verify().unwrap().is_ok());
+
+    // The writer dies: now its records are stale, and repair aborts its upload and removes its objects.
+    writer.0.kill().unwrap();
+    writer.0.wait().unwrap();
+    peer(&e, &["delete", &e, "repair", &format!("ds/.tmp/{remote_record}")]);
+    assert_clean(&e, "repair", "ds");
+    assert_eq!(digests(url), committed);
+    assert!(!objects(&e, "repair", "ds").contains_key(&format!("shards/{remote}")), "an unnamed object stayed");
 }
 
 #[test]

@@ -138,10 +138,14 @@ mod tests {
         let nearest = InpaintConfig::Nearest {}.build().unwrap().inpaint(&d, &known, &ctx);
         assert!(nearest.data().iter().all(|z| pool.contains(&z.to_bits())));
         let (lo, hi) = pool.iter().map(|b| f32::from_bits(*b)).fold((f32::MAX, 0.0f32), |(l, h), z| (l.min(z), h.max(z)));
+        // With a known pixel every 5 on average, every pixel is in reach of each fill (IP-Basic's
+        // dilations included: it leaves 0 only farther than 15 pixels from known depth), so each fills
+        // every pixel, with a depth within the known ones.
         for m in [InpaintConfig::Background {}, InpaintConfig::PushPull {}, InpaintConfig::IpBasic {}] {
-            // (IP-Basic's blurs average known depths; it leaves 0 where its dilations do not reach.)
             let out = m.build().unwrap().inpaint(&d, &known, &ctx);
-            assert!(out.data().iter().all(|z| (*z >= lo - 1e-5 && *z <= hi + 1e-5) || *z == 0.0), "{m:?}");
+            for (i, z) in out.data().iter().enumerate() {
+                assert!(*z >= lo - 1e-5 && *z <= hi + 1e-5, "{m:?}: pixel {i} is {z}, outside the known depths [{lo}, {hi}]");
+            }
         }
     }
 }

@@ -144,21 +144,33 @@ mod tests {
     use super::*;
 
     #[test]
-    fn each_angle_histogram_sums_to_200_or_0() {
-        // SPFH sums to 100 per angle and the weighted neighbour part is normalised to 100.
-        let pts: Vec<Point> = (0..300)
+    fn each_angle_histogram_sums_to_200_and_only_an_isolated_point_has_none() {
+        // SPFH sums to 100 per angle and the weighted neighbour part is normalised to 100, for every
+        // point with a neighbour within the radius; a point without one has an all-zero row.
+        let mut pts: Vec<Point> = (0..300)
             .map(|i| {
                 let a = i as f32 * 0.37;
                 Point::new(a.cos() * (1.0 + 0.001 * i as f32), a.sin(), 2.0 + 0.003 * i as f32)
             })
             .collect();
+        pts.push(Point::new(10.0, 10.0, 10.0));
         let normals = estimate_normals(&pts, 0.3, 30);
         let f = fpfh(&pts, &normals, 0.3, 50);
-        for row in f.chunks(FPFH_DIM) {
+        assert_eq!(f.len(), pts.len() * FPFH_DIM);
+        let mut with_neighbours = 0;
+        for (i, row) in f.chunks(FPFH_DIM).enumerate() {
+            // Neighbours by brute force (strictly inside the radius, as the search counts them).
+            let alone = pts.iter().enumerate().all(|(j, q)| j == i || (pts[i] - q).norm_squared() >= 0.3 * 0.3);
+            if alone {
+                assert!(row.iter().all(|v| *v == 0.0), "point {i} has no neighbour but a histogram {row:?}");
+                continue;
+            }
+            with_neighbours += 1;
             for a in 0..3 {
                 let s: f32 = row[a * BINS..(a + 1) * BINS].iter().sum();
-                assert!((s - 200.0).abs() < 1e-2 || s == 0.0, "{s}");
+                assert!((s - 200.0).abs() < 1e-2, "point {i}, angle {a}: sums to {s}, not 200");
             }
         }
+        assert_eq!(with_neighbours, 300, "only the far point is isolated");
     }
 }

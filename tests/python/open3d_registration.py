@@ -10,7 +10,7 @@
       normals r=2*voxel max_nn 30, FPFH r=5*voxel max_nn 100, SAMPLES random points per cloud, then
       registration_ransac_based_on_feature_matching with the edge-length 0.9 and distance checkers) and scores each
       estimate with the official error (numpy, written here from the protocol's definition). Prints
-      `pairs <n>`, `registered <k>`, `seconds <t>`.
+      `pair <scene> <i> <j> <0|1>` per pair (registered or not), then `pairs <n>`, `registered <k>`, `seconds <t>`.
 """
 import glob
 import os
@@ -99,7 +99,9 @@ def rr(bench, name, voxel, samples, distance, iterations):
                 reg.RANSACConvergenceCriteria(iterations, 0.999))
             seconds += time.perf_counter() - t0
             pairs += 1
-            registered += official_error(gt, np.asarray(res.transformation), infos[(i, j)]) <= 0.2 ** 2
+            ok = official_error(gt, np.asarray(res.transformation), infos[(i, j)]) <= 0.2 ** 2
+            registered += ok
+            print(f"pair {scene} {i} {j} {int(ok)}")
     print(f"pairs {pairs}\nregistered {registered}\nseconds {seconds:.3f}")
 
 

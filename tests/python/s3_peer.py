@@ -6,6 +6,10 @@
   objects ENDPOINT BUCKET PREFIX   every key under PREFIX with its size and ETag (boto3)
   delete ENDPOINT BUCKET KEY       deletes one object (boto3)
   abandon ENDPOINT BUCKET PREFIX RECORD OBJECT   a writer that died mid multipart upload: one part sent, record written
+  keys ENDPOINT BUCKET             every key of the bucket (boto3), as a JSON list
+  buckets ENDPOINT                 the bucket names (boto3), as a JSON list
+  put ENDPOINT BUCKET KEY FILE     puts the bytes of the local FILE as one object (boto3)
+  copy ENDPOINT BUCKET FROM TO     copies one object to another key of the bucket (boto3)
 
 Rows are printed as JSON: {pair_key: [status, overlap_source, n_source_points, n_target_points, unit_index]}.
 The endpoint's credentials are taken from the environment (AWS_ACCESS_KEY_ID, ...).
@@ -96,6 +100,20 @@ def main():
         body = json.dumps({"object": obj, "upload_id": upload}).encode()
         s3.put_object(Bucket=bucket, Key=f"{prefix}/.tmp/{record}", Body=body)
         print(upload)
+    elif cmd == "keys":
+        endpoint, bucket = args
+        pages = boto(endpoint).get_paginator("list_objects_v2").paginate(Bucket=bucket)
+        print(json.dumps(sorted(o["Key"] for p in pages for o in p.get("Contents", []))))
+    elif cmd == "buckets":
+        (endpoint,) = args
+        print(json.dumps(sorted(b["Name"] for b in boto(endpoint).list_buckets().get("Buckets", []))))
+    elif cmd == "put":
+        endpoint, bucket, key, path = args
+        with open(path, "rb") as f:
+            boto(endpoint).put_object(Bucket=bucket, Key=key, Body=f.read())
+    elif cmd == "copy":
+        endpoint, bucket, src, dst = args
+        boto(endpoint).copy_object(Bucket=bucket, Key=dst, CopySource={"Bucket": bucket, "Key": src})
     else:
         sys.exit(f"unknown command {cmd}")
 

@@ -9,7 +9,10 @@ use std::path::PathBuf;
 /// The real-data folder from `POINTREGGPT_REAL_DATA` (`make test` and `.ci/run` set it to
 /// `../shared/realdata`). A test that needs it fails when it is missing, so a run without the data
 /// cannot pass silently; `POINTREGGPT_SKIP_REAL_DATA=1` is the explicit opt-out for a machine that
-/// has no copy (the test then returns `None` after a note).
+/// has no copy (refused when `CI` is set). A skipped test returns `None` and still shows as `ok` in
+/// cargo's list (stable Rust cannot mark a test ignored at run time), so the skip is made visible
+/// outside the captured output: a `SKIPPED` line on the real stderr when it happens, and a count with
+/// the names after the test binary's summary ([`skipped_real_data_tests`]).
 pub fn real_data() -> Option<PathBuf> {
     match std::env::var_os("POINTREGGPT_REAL_DATA").filter(|v| !v.is_empty()) {
         Some(dir) => {
@@ -18,7 +21,7 @@ pub fn real_data() -> Option<PathBuf> {
             Some(dir)
         }
         None if std::env::var_os("POINTREGGPT_SKIP_REAL_DATA").is_some() && std::env::var_os("CI").is_none() => {
-            eprintln!("note: POINTREGGPT_SKIP_REAL_DATA is set; skipping a real-data test");
+            report_skip();
             None
         }
         None => panic!(
@@ -28,14 +31,99 @@ pub fn real_data() -> Option<PathBuf> {
     }
 }
 
-/// The `pointreggpt` binary built for these tests.
+/// Names of the tests of this binary that skipped their real-data claim so far.
+static SKIPPED: std::sync::Mutex<Vec<String>> = std::sync::Mutex::new(Vec::new());
+
+/// The tests of this binary that returned early under `POINTREGGPT_SKIP_REAL_DATA` so far.
+pub fn skipped_real_data_tests() -> Vec<String> {
+    SKIPPED.lock().unwrap_or_else(|e| e.into_inner()).clone()
+}
+
+/// Records a skipped real-data test: writes a `SKIPPED` line straight to the process's stderr (cargo
+/// test captures `eprintln!` of passing tests, not the file descriptor), and once per binary registers
+/// an exit hook that prints the count and names after cargo's `test result:` line.
+fn report_skip() {
+    use std::io::Write;
+    // libtest names each test's thread after the test.
+    let name = std::thread::current().name().unwrap_or("a real-data test").to_string();
+    let _ = writeln!(
+        std::io::stderr(),
+        "SKIPPED {name}: POINTREGGPT_SKIP_REAL_DATA is set, so this real-data test checks nothing (it still shows as ok)"
+    );
+    SKIPPED.lock().unwrap_or_else(|e| e.into_inner()).push(name);
+    static HOOK: std::sync::Once = std::sync::Once::new();
+    HOOK.call_once(|| {
+        extern "C" {
+            fn atexit(f: extern "C" fn()) -> std::os::raw::c_int;
+        }
+        extern "C" fn summary() {
+            let names = skipped_real_data_tests();
+            let _ = writeln!(
+                std::io::stderr(),
+                "\nSKIPPED {} real-data test(s) of {} (POINTREGGPT_SKIP_REAL_DATA is set; each is listed as ok above but checked nothing): {}\n",
+                names.len(),
+                std::env::args().next().unwrap_or_default(),
+                names.join(", ")
+            );
+        }
+        // SAFETY: registers a plain function with the C library; it runs once when the process exits.
+        unsafe {
+            atexit(summary);
+        }
+    });
+}
+
+/// The `pointreggpt` binary built for these tests, with the caller's cloud credentials removed
+/// ([`command`]).
 pub fn bin() -> std::process::Command {
-    std::process::Command::new(env!("CARGO_BIN_EXE_pointreggpt"))
+    command(env!("CARGO_BIN_EXE_pointreggpt"))
 }
 
 /// The Python interpreter the tests run peers with (`PYTHON`, default `python3`).
 pub fn python() -> String {
     std::env::var("PYTHON").unwrap_or_else(|_| "python3".into())
+}
+
+/// A Python peer process ([`python`]), with the caller's cloud credentials removed ([`command`]).
+pub fn python_command() -> std::process::Command {
+    command(python())
+}
+
+/// The AWS settings every process a test starts runs with, the test process's own store clients
+/// included: no instance metadata service (`AWS_EC2_METADATA_DISABLED`, honoured by the AWS SDKs,
+/// boto3, pyarrow and pointreggpt), and no shared credential or config file of the caller's home.
+pub const ISOLATED_AWS: [(&str, &str); 3] = [
+    ("AWS_EC2_METADATA_DISABLED", "true"),
+    ("AWS_SHARED_CREDENTIALS_FILE", "/nonexistent/pointreggpt-tests/aws-credentials"),
+    ("AWS_CONFIG_FILE", "/nonexistent/pointreggpt-tests/aws-config"),
+];
+
+/// `program` without any `AWS_*` variable the test process inherited (keys, profiles, session tokens,
+/// web-identity and container credential settings) and with [`ISOLATED_AWS`]: a test talks only to the
+/// servers it starts and never to a cloud or its metadata address. A test adds the variables of its own
+/// server after this (`Command::envs`).
+pub fn command(program: impl AsRef<std::ffi::OsStr>) -> std::process::Command {
+    let mut c = std::process::Command::new(program);
+    for (key, _) in std::env::vars_os() {
+        if key.to_string_lossy().starts_with("AWS_") {
+            c.env_remove(key);
+        }
+    }
+    c.envs(ISOLATED_AWS);
+    c
+}
+
+/// Removes every `AWS_*` variable from this test process and sets [`ISOLATED_AWS`], for the store
+/// clients a test runs in-process (hold `store::ENV` while the environment is changed).
+pub fn isolate_aws_env() {
+    for (key, _) in std::env::vars_os() {
+        if key.to_string_lossy().starts_with("AWS_") {
+            std::env::remove_var(key);
+        }
+    }
+    for (k, v) in ISOLATED_AWS {
+        std::env::set_var(k, v);
+    }
 }
 
 /// A small synthetic build config: `scenes` scenes of `frames` frames at `width`×`height` (fx scaled

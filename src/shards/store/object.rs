@@ -64,6 +64,14 @@ impl ObjectDatasetStore {
             ObjectStoreScheme::AmazonS3 => {
                 let mut b = object_store::aws::AmazonS3Builder::from_env().with_url(text).with_retry(retry);
                 b = aws_profile::apply(b)?;
+                if metadata_disabled() && !has_aws_credentials(&b) {
+                    return Err(bad(
+                        "no AWS credentials: none in the AWS_* variables or the AWS_PROFILE files, and \
+                         AWS_EC2_METADATA_DISABLED turns off the instance metadata service (export \
+                         AWS_ACCESS_KEY_ID and AWS_SECRET_ACCESS_KEY, or set AWS_PROFILE)"
+                            .into(),
+                    ));
+                }
                 let endpoint = b.get_config_value(&object_store::aws::AmazonS3ConfigKey::Endpoint);
                 if endpoint.is_some_and(|e| e.starts_with("http://")) {
                     b = b.with_allow_http(true);
@@ -173,9 +181,37 @@ fn unknown_scheme(text: &str, scheme: &str) -> Error {
     )
 }
 
+/// Retries for [`RETRY_SECONDS`] (or `POINTREGGPT_STORE_RETRY_SECONDS`): the time bound alone ends them.
+/// (`object_store`'s default also stops after 10 retries, and its jittered backoff, each wait drawn
+/// between 0.1 s and `base` × the previous one, does not grow with base 2: ten retries took 1–3 s, so
+/// a store away for a few seconds failed the build. Base 3, the decorrelated jitter AWS recommends,
+/// grows slowly; waits are capped at 5 s so that work resumes soon after the store is back.)
 fn retry_config() -> RetryConfig {
     let seconds = std::env::var("POINTREGGPT_STORE_RETRY_SECONDS").ok().and_then(|v| v.trim().parse().ok()).unwrap_or(RETRY_SECONDS);
-    RetryConfig { retry_timeout: Duration::from_secs(seconds), max_retries: 10, ..Default::default() }
+    RetryConfig {
+        retry_timeout: Duration::from_secs(seconds),
+        max_retries: usize::MAX,
+        backoff: object_store::BackoffConfig { init_backoff: Duration::from_millis(100), max_backoff: Duration::from_secs(5), base: 3.0 },
+    }
+}
+
+/// `AWS_EC2_METADATA_DISABLED=true`, as the AWS SDKs read it: never ask the instance metadata service.
+fn metadata_disabled() -> bool {
+    std::env::var("AWS_EC2_METADATA_DISABLED").is_ok_and(|v| v.trim().eq_ignore_ascii_case("true"))
+}
+
+/// Whether `b` has credentials of its own (keys, web identity, container credentials) or signs nothing,
+/// so that `object_store` will not fall back to the instance metadata service (which it does whatever
+/// `AWS_EC2_METADATA_DISABLED` says).
+fn has_aws_credentials(b: &object_store::aws::AmazonS3Builder) -> bool {
+    use object_store::aws::AmazonS3ConfigKey as K;
+    let has = |k: K| b.get_config_value(&k).is_some_and(|v| !v.trim().is_empty());
+    has(K::AccessKeyId)
+        || has(K::SecretAccessKey)
+        || (has(K::WebIdentityTokenFile) && has(K::RoleArn))
+        || has(K::ContainerCredentialsRelativeUri)
+        || (has(K::ContainerCredentialsFullUri) && has(K::ContainerAuthorizationTokenFile))
+        || b.get_config_value(&K::SkipSignature).is_some_and(|v| v.trim().eq_ignore_ascii_case("true"))
 }
 
 /// Seconds since the Unix epoch.
