@@ -1,11 +1,16 @@
-//! `pointreggpt eval boost` on a tiny synthetic run: it writes the table, the same table twice from
-//! scratch (determinism), a rerun redoes no finished unit, and the real pairs of C1 follow the generated
-//! pairs' overlap histogram (counted here from the dataset's own rows).
+//! `pointreggpt eval boost` on tiny synthetic runs: the table's numbers against an independent
+//! aggregation of the per-pair scores, the same table twice from scratch (determinism), a rerun redoes no
+//! finished unit (the scores files keep their inodes), the real pairs of C1 follow the generated pairs'
+//! source-side overlap histogram (both overlaps counted here: C3's from the dataset's rows, C1's by brute
+//! force from the clouds and poses), every alias of the single-frame protocol and `--model fpfh-mlp` run
+//! with the counts they promise, other training settings are refused, and the fragment regime end to end.
 
 mod support;
 
+use pointreggpt::geometry::{pose_from_rows, Point};
 use pointreggpt::shards::dataset::Dataset;
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
+use std::os::unix::fs::MetadataExt;
 use std::path::{Path, PathBuf};
 use support::bin;
 
@@ -53,6 +58,84 @@ fn scores_files(unit: &Path) -> Vec<PathBuf> {
     v
 }
 
+/// (benchmark, samples) → per-pair inlier ratios, from a unit's scores file (columns: benchmark, scene, i,
+/// j, samples, correspondences, inlier_ratio, ...).
+fn pair_irs(path: &Path) -> BTreeMap<(String, usize), Vec<((String, usize, usize), f64)>> {
+    let mut out: BTreeMap<(String, usize), Vec<((String, usize, usize), f64)>> = BTreeMap::new();
+    for line in std::fs::read_to_string(path).unwrap().lines().skip(1) {
+        let f: Vec<&str> = line.split('\t').collect();
+        let key = (f[1].to_string(), f[2].parse().unwrap(), f[3].parse().unwrap());
+        out.entry((f[0].to_string(), f[4].parse().unwrap())).or_default().push((key, f[6].parse().unwrap()));
+    }
+    out
+}
+
+/// Checks boost.csv (IR mean / min / max over seeds) and boost-paired.csv (the paired difference's mean)
+/// against the per-pair scores of the units, aggregated here.
+fn check_table_against_scores(out: &Path, units: &[(&str, Vec<&str>)], paired: &[(&str, &str)]) {
+    let csv = std::fs::read_to_string(out.join("boost.csv")).unwrap();
+    let mut per_condition: HashMap<&str, Vec<BTreeMap<(String, usize), Vec<((String, usize, usize), f64)>>>> = HashMap::new();
+    for (c, dirs) in units {
+        for d in dirs {
+            let files = scores_files(&out.join(d));
+            assert_eq!(files.len(), 1, "{d}: {files:?}");
+            per_condition.entry(c).or_default().push(pair_irs(&files[0]));
+        }
+    }
+    let mut checked = 0;
+    for line in csv.lines().skip(1) {
+        let f: Vec<&str> = line.split(',').collect();
+        let Some(seeds) = per_condition.get(f[2]) else { continue };
+        let key = (f[0].to_string(), f[1].parse::<usize>().unwrap());
+        let irs: Vec<f64> = seeds.iter().map(|s| 100.0 * s[&key].iter().map(|p| p.1).sum::<f64>() / s[&key].len() as f64).collect();
+        let mean = irs.iter().sum::<f64>() / irs.len() as f64;
+        let (min, max) = irs.iter().fold((f64::MAX, f64::MIN), |(a, b), &x| (a.min(x), b.max(x)));
+        let got: Vec<f64> = f[8..11].iter().map(|v| v.parse().unwrap()).collect();
+        assert_eq!(f[3].parse::<usize>().unwrap(), seeds.len(), "{line}");
+        assert_eq!(f[4].parse::<usize>().unwrap(), seeds[0][&key].len(), "{line}: pairs");
+        for (g, w) in got.iter().zip([mean, min, max]) {
+            assert!((g - w).abs() < 1e-3, "{line}: IR {g} vs {w} from the scores");
+        }
+        checked += 1;
+    }
+    assert!(checked >= per_condition.len(), "{checked} rows checked");
+    let paired_csv = std::fs::read_to_string(out.join("boost-paired.csv")).unwrap();
+    for (a, b) in paired {
+        for line in paired_csv.lines().skip(1).filter(|l| { let f: Vec<&str> = l.split(',').collect(); f[2] == *a && f[3] == *b }) {
+            let f: Vec<&str> = line.split(',').collect();
+            let key = (f[0].to_string(), f[1].parse::<usize>().unwrap());
+            let (sa, sb) = (&per_condition[a], &per_condition[b]);
+            let mut diffs = Vec::new();
+            for k in 0..sa.len().max(sb.len()) {
+                let (x, y) = (&sa[k.min(sa.len() - 1)][&key], &sb[k.min(sb.len() - 1)][&key]);
+                for (p, q) in x.iter().zip(y) {
+                    assert_eq!(p.0, q.0, "paired on the same pairs");
+                    diffs.push(100.0 * (p.1 - q.1));
+                }
+            }
+            let mean = diffs.iter().sum::<f64>() / diffs.len() as f64;
+            assert_eq!(f[4].parse::<usize>().unwrap(), diffs.len(), "{line}");
+            assert!((f[5].parse::<f64>().unwrap() - mean).abs() < 1e-3, "{line}: mean difference {mean} from the scores");
+        }
+    }
+}
+
+/// The source-side overlap of real pair (i, j) of `seq` (source frame j, target frame i), by brute
+/// force: the fraction of j's cloud (`clouds/cloud_bin_<j>.ply`, as `fragments --single-frames` makes it)
+/// with a point of i's cloud within 3.75 cm under the captured poses.
+fn brute_force_source_overlap(clouds: &Path, seq: &Path, i: usize, j: usize) -> f64 {
+    let read = |k: usize| pointreggpt::ply::read_ply(&clouds.join(format!("cloud_bin_{k}.ply"))).unwrap();
+    let pose = |k: usize| {
+        let text = std::fs::read_to_string(seq.join(format!("frame-{k:06}.pose.txt"))).unwrap();
+        let v: Vec<f64> = text.split_whitespace().map(|x| x.parse().unwrap()).collect();
+        pose_from_rows(&v.try_into().unwrap()).unwrap()
+    };
+    let t = (pose(i).inverse() * pose(j)).cast::<f32>();
+    let (source, target) = (read(j), read(i));
+    let near = source.iter().filter(|p| { let q: Point = t * *p; target.iter().any(|x| (x - q).norm() < 0.0375) }).count();
+    near as f64 / source.len() as f64
+}
+
 /// `training-pairs.tsv`: (key, overlap, source-side overlap) per line.
 fn read_tsv(path: &Path) -> Vec<(String, f64, f64)> {
     std::fs::read_to_string(path).unwrap().lines().skip(1).map(|l| {
@@ -82,16 +165,18 @@ fn a_tiny_run_writes_the_table_deterministically_and_resumes_without_redoing_uni
     let csv = std::fs::read_to_string(a.join("boost.csv")).unwrap();
     let c3_rows: Vec<&str> = csv.lines().filter(|l| l.split(',').nth(2) == Some("C3")).collect();
     assert_eq!(c3_rows.len(), 2, "{csv}");
-    assert!(c3_rows.iter().all(|l| l.split(',').nth(3) == Some("2")), "two seeds: {csv}");
-
-    // Resume: nothing is redone (the scores files are not rewritten) and the table is the same.
+    // The table's numbers, aggregated here from the units' per-pair scores.
     let units = ["C0", "C1/seed-0", "C1/seed-1", "C3/seed-0", "C3/seed-1"];
+    check_table_against_scores(&a, &[("C0", vec!["C0"]), ("C1", vec!["C1/seed-0", "C1/seed-1"]), ("C3", vec!["C3/seed-0", "C3/seed-1"])], &[("C1", "C0"), ("C3", "C0")]);
+
+    // Resume: nothing is redone (an atomic rewrite would give each scores file a new inode) and the table
+    // is the same.
     let scores: Vec<PathBuf> = units.iter().map(|u| scores_files(&a.join(u))).inspect(|f| assert_eq!(f.len(), 1, "{f:?}")).map(|mut f| f.remove(0)).collect();
-    let mtime = |p: &Path| std::fs::metadata(p).unwrap().modified().unwrap();
-    let mtimes: Vec<_> = scores.iter().map(|p| mtime(p)).collect();
+    let inode = |p: &Path| std::fs::metadata(p).unwrap().ino();
+    let inodes: Vec<_> = scores.iter().map(|p| inode(p)).collect();
     let again = boost(&bench, &seq, &a);
     assert!(again.contains("0 units scored (0 of them trained first), 5 already done"), "{again}");
-    assert_eq!(mtimes, scores.iter().map(|p| mtime(p)).collect::<Vec<_>>());
+    assert_eq!(inodes, scores.iter().map(|p| inode(p)).collect::<Vec<_>>(), "no scores file was rewritten");
     assert_eq!(std::fs::read_to_string(a.join("boost.txt")).unwrap(), table);
 
     // Another benchmark with the same --out: every unit is scored on it, none retrained (the checkpoints
@@ -99,10 +184,10 @@ fn a_tiny_run_writes_the_table_deterministically_and_resumes_without_redoing_uni
     let bench2 = dir.path().join("bench2");
     run_ok(&["fragments", other.join("synthetic-200").to_str().unwrap(), "--single-frames", "--gaps", "10,15", "--every", "3", "--out", bench2.to_str().unwrap(), "--quiet"]);
     let checkpoints: Vec<PathBuf> = units[1..].iter().map(|u| a.join(u).join("latest.safetensors")).collect();
-    let ck_mtimes: Vec<_> = checkpoints.iter().map(|p| mtime(p)).collect();
+    let ck_inodes: Vec<_> = checkpoints.iter().map(|p| inode(p)).collect();
     let third = boost(&bench2, &seq, &a);
     assert!(third.contains("5 units scored (0 of them trained first), 0 already done"), "{third}");
-    assert_eq!(ck_mtimes, checkpoints.iter().map(|p| mtime(p)).collect::<Vec<_>>());
+    assert_eq!(ck_inodes, checkpoints.iter().map(|p| inode(p)).collect::<Vec<_>>(), "no checkpoint was rewritten");
     assert!(units.iter().all(|u| scores_files(&a.join(u)).len() == 2));
     let pairs_in = |bench: &Path| -> usize {
         let log = std::fs::read_to_string(bench.join("metadata/benchmarks/single-frame/synthetic-200-frames/gt.log")).unwrap();
@@ -133,7 +218,7 @@ fn a_tiny_run_writes_the_table_deterministically_and_resumes_without_redoing_uni
     assert!(!o.status.success(), "a rerun with other --steps must fail");
     assert!(err.contains("boost-settings.json") && err.contains("train.steps: recorded 3, now 4"), "{err}");
     assert_eq!(std::fs::read_to_string(a.join("boost.txt")).unwrap(), before);
-    assert_eq!(ck_mtimes, checkpoints.iter().map(|p| mtime(p)).collect::<Vec<_>>(), "no unit retrained");
+    assert_eq!(ck_inodes, checkpoints.iter().map(|p| inode(p)).collect::<Vec<_>>(), "no unit retrained");
 
     // Conditions that read no network run without the models folder (the record names it as given).
     let c = dir.path().join("c");
@@ -146,9 +231,17 @@ fn a_tiny_run_writes_the_table_deterministically_and_resumes_without_redoing_uni
     assert_eq!(std::fs::read_to_string(b.join("boost.txt")).unwrap(), table);
 
     // C1's real pairs follow the source-side overlap histogram of C3's: C3's overlaps counted from the
-    // dataset's rows, and every 10 % bin of C1 within one pair of C3's share scaled to C1's count.
+    // dataset's rows, C1's by brute force from the clouds `fragments --single-frames` makes of the training
+    // frames and the captured poses; every 10 % bin of C1 within one pair of C3's share scaled to C1's count.
     let rows = Dataset::open(a.join("data/classical")).unwrap().read_pairs().unwrap();
     let overlap: HashMap<String, f64> = rows.iter().map(|r| (r.pair_key.clone(), r.overlap_source)).collect();
+    let clouds_bench = dir.path().join("train-frames");
+    run_ok(&["fragments", seq.to_str().unwrap(), "--single-frames", "--first", "0", "--frames", "30", "--every", "1", "--gaps", "2,4,6,8,10,12,14,16,18,20", "--out", clouds_bench.to_str().unwrap(), "--quiet"]);
+    let clouds = clouds_bench.join("synthetic-500-frames");
+    let real_overlap = |key: &str| -> f64 {
+        let f: Vec<&str> = key.split('/').collect();
+        brute_force_source_overlap(&clouds, &seq, f[1].parse().unwrap(), f[2].parse().unwrap())
+    };
     // Checked for the protocol's draw and for a redraw.
     let bins = |v: &[f64]| -> Vec<usize> {
         let mut h = vec![0usize; 9];
@@ -160,7 +253,7 @@ fn a_tiny_run_writes_the_table_deterministically_and_resumes_without_redoing_uni
     };
     for seed in ["seed-0", "seed-1-redrawn"] {
         let c3: Vec<f64> = read_tsv(&a.join("C3").join(seed).join("training-pairs.tsv")).iter().map(|(k, _, _)| overlap[k]).collect();
-        let c1: Vec<f64> = read_tsv(&a.join("C1").join(seed).join("training-pairs.tsv")).into_iter().map(|(_, _, o)| o).collect();
+        let c1: Vec<f64> = read_tsv(&a.join("C1").join(seed).join("training-pairs.tsv")).iter().map(|(k, _, _)| real_overlap(k)).collect();
         assert!(c3.len() >= 10 && c1.len() >= 5, "{seed}: {} generated, {} real pairs", c3.len(), c1.len());
         let (h3, h1) = (bins(&c3), bins(&c1));
         for b in 0..9 {
@@ -251,4 +344,76 @@ fn the_fragment_regime_runs_end_to_end() {
     };
     assert_eq!(last_step("frag_nofill_2"), ((0.5 * (3 * n) as f64) / 4.0).ceil() as u64);
     assert_eq!(last_step("frag"), ((0.5 * n as f64) / 4.0).ceil() as u64);
+}
+
+/// Whether a training-pairs key names a real single-frame pair (`<scene>/<i>/<j>`) rather than a generated
+/// one (`<scene>/frame-000012#3`).
+fn is_real(key: &str) -> bool {
+    !key.contains('#')
+}
+
+#[test]
+fn every_alias_and_the_fpfh_mlp_run_with_their_counts_and_other_settings_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let (seq_root, other, bench) = (dir.path().join("seq"), dir.path().join("other"), dir.path().join("bench"));
+    run_ok(&["synth", "--out", seq_root.to_str().unwrap(), "--frames", "40", "--seed", "501"]);
+    run_ok(&["synth", "--out", other.to_str().unwrap(), "--frames", "40", "--seed", "200"]);
+    run_ok(&["fragments", other.join("synthetic-200").to_str().unwrap(), "--single-frames", "--every", "10", "--out", bench.to_str().unwrap(), "--quiet"]);
+    let seq = seq_root.join("synthetic-501");
+    let out = dir.path().join("all");
+    let extra = ["--conditions", "C2,C4,C5,C5x2,C6,C6x2", "--seeds", "1", "--pairs", "12", "--steps", "2", "--samples", "100", "--model", "fpfh-mlp"];
+    let stdout = boost_with(&bench, &seq, &out, &extra);
+    assert!(stdout.contains("6 units scored (6 of them trained first), 0 already done"), "{stdout}");
+    let table = std::fs::read_to_string(out.join("boost.txt")).unwrap();
+    for want in ["C2 (reproj)", "C4 (neural)", "C5 (single:0.5+classical:0.5)", "C5x2 (single+classical)", "C6x2 (single+neural)", "C5 - C1"] {
+        if want == "C5 - C1" {
+            assert!(!table.contains(want), "C1 did not run: no C5 - C1 row\n{table}");
+        } else {
+            assert!(table.contains(want), "{want} missing from\n{table}");
+        }
+    }
+    // The mixes' counts: C5 takes ⌈n/2⌉ real and ⌊n/2⌋ generated pairs of C1's n, C5x2 n and n.
+    let listing = |c: &str| read_tsv(&out.join(c).join("seed-0/training-pairs.tsv"));
+    let split = |c: &str| -> (usize, usize) { let l = listing(c); let r = l.iter().filter(|(k, _, _)| is_real(k)).count(); (r, l.len() - r) };
+    let (r2, g2) = split("C5x2");
+    assert!(r2 > 0 && g2 == r2, "C5x2: {r2} real, {g2} generated");
+    assert_eq!(split("C5"), (r2.div_ceil(2), r2 / 2));
+    assert_eq!(split("C6x2"), (r2, r2));
+    assert_eq!(split("C6"), (r2.div_ceil(2), r2 / 2));
+    assert_eq!(split("C2"), (0, 12));
+    assert_eq!(split("C4"), (0, 12));
+    // C6's generated pairs come from the neural generator: its dataset was built with the U-Net and the
+    // diffusion refiner; C2's from re-projection only.
+    let config = |g: &str| std::fs::read_to_string(out.join("data").join(g).join("dataset.toml")).unwrap();
+    assert!(config("neural").contains("method = \"unet\"") && config("neural").contains("method = \"diffusion\""));
+    assert!(config("reproj").contains("[inpaint]\nmethod = \"none\""));
+    assert!(listing("C6").iter().filter(|(k, _, _)| !is_real(k)).all(|(k, _, _)| listing("C4").iter().any(|(l, _, _)| l == k)), "C6 draws from C4's pool");
+    // Every unit trained the MLP on FPFH.
+    let meta = pointreggpt::registration::learned::read_meta(&out.join("C5/seed-0/latest.safetensors")).unwrap();
+    assert!(matches!(meta.model, pointreggpt::registration::learned::DescriptorModel::FpfhMlp { .. }), "{:?}", meta.model);
+
+    // Any other training setting with the same --out is refused, naming it; nothing is retrained.
+    let classical = dir.path().join("classical.toml");
+    let text = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("pipelines/paper-3dmatch-classical.toml")).unwrap();
+    std::fs::write(&classical, text + "\n[voxelize]\nvoxel = 0.03\n").unwrap();
+    for (flag, value, named) in [
+        ("--pairs", "13", "pairs: recorded 12, now 13"),
+        ("--frames", "29", "frames: recorded 30, now 29"),
+        ("--real-gaps", "2,4", "real_gaps"),
+        ("--model", "patch", "train.model"),
+        ("--epochs", "2", "train.epochs"),
+        ("--classical-config", classical.to_str().unwrap(), "classical.voxelize.voxel"),
+    ] {
+        // `extra` with `flag`'s value replaced (or the flag added).
+        let mut args = extra.to_vec();
+        match args.iter().position(|a| *a == flag) {
+            Some(i) => args[i + 1] = value,
+            None => args.extend([flag, value]),
+        }
+        let o = bin().args(boost_args(&bench, &seq, &out, &args)).output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success() && err.contains(named), "{flag} {value}: {err}");
+    }
+    // The same settings again: every unit is done.
+    assert!(boost_with(&bench, &seq, &out, &extra).contains("0 units scored (0 of them trained first), 6 already done"));
 }
