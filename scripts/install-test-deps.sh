@@ -6,6 +6,7 @@
 # build, ~3 GB to download, 4.6 GB installed, 54 s here; it runs on the CPU). `make test` and .ci/run run
 # this first. open3d 0.19.0 (with Debian's libusb-1.0-0, which its import may need) is the peer of
 # tests/registration.rs (normals, FPFH, RANSAC; tests/python/open3d_registration.py): a ~450 MB wheel.
+# deltalake and polars read the datasets' Delta Lake tables in tests/delta.rs (tests/python/delta_peer.py).
 #
 # Idempotent: installs nothing that already imports.
 # PYTHON selects the interpreter (default python3).
@@ -18,7 +19,9 @@ MOTO_VERSION="5.2.1"
 FLASK_VERSION="3.1.3"
 FLASK_CORS_VERSION="6.0.2"
 OPEN3D_VERSION="0.19.0"
-CHECK='import pyarrow, duckdb, moto.server, flask, flask_cors, boto3, open3d'
+DELTALAKE_VERSION="1.6.6"
+POLARS_VERSION="2.1.0"
+CHECK='import pyarrow, duckdb, moto.server, flask, flask_cors, boto3, open3d, deltalake, polars'
 
 die() {
     echo "install-test-deps: $*" >&2
@@ -53,7 +56,7 @@ torch_peers() {
 }
 
 if modules_import; then
-    echo "install-test-deps: already installed ($("$PYTHON" -c 'import pyarrow, duckdb, importlib.metadata as m; print("pyarrow", pyarrow.__version__, "duckdb", duckdb.__version__, "moto", m.version("moto"), "open3d", m.version("open3d"))'))"
+    echo "install-test-deps: already installed ($("$PYTHON" -c 'import pyarrow, duckdb, importlib.metadata as m; print("pyarrow", pyarrow.__version__, "duckdb", duckdb.__version__, "moto", m.version("moto"), "open3d", m.version("open3d"), "deltalake", m.version("deltalake"), "polars", m.version("polars"))'))"
     torch_peers
     exit 0
 fi
@@ -62,16 +65,17 @@ command -v "$PYTHON" >/dev/null 2>&1 || die "no Python interpreter '$PYTHON' (se
 "$PYTHON" -m pip --version >/dev/null 2>&1 || die "'$PYTHON -m pip' does not work; install pip first"
 
 install_libusb
-echo "install-test-deps: $PYTHON -m pip install pyarrow==$PYARROW_VERSION duckdb==$DUCKDB_VERSION moto[s3]==$MOTO_VERSION flask==$FLASK_VERSION flask-cors==$FLASK_CORS_VERSION open3d==$OPEN3D_VERSION"
+echo "install-test-deps: $PYTHON -m pip install pyarrow==$PYARROW_VERSION duckdb==$DUCKDB_VERSION moto[s3]==$MOTO_VERSION flask==$FLASK_VERSION flask-cors==$FLASK_CORS_VERSION open3d==$OPEN3D_VERSION deltalake==$DELTALAKE_VERSION polars==$POLARS_VERSION"
 if ! "$PYTHON" -m pip install --disable-pip-version-check -q \
     "pyarrow==$PYARROW_VERSION" "duckdb==$DUCKDB_VERSION" "moto[s3]==$MOTO_VERSION" \
-    "flask==$FLASK_VERSION" "flask-cors==$FLASK_CORS_VERSION" "open3d==$OPEN3D_VERSION"; then
+    "flask==$FLASK_VERSION" "flask-cors==$FLASK_CORS_VERSION" "open3d==$OPEN3D_VERSION" \
+    "deltalake==$DELTALAKE_VERSION" "polars==$POLARS_VERSION"; then
     die "pip install failed: is PyPI reachable? (see pip's message above)"
 fi
 
 if ! modules_import; then
     "$PYTHON" -c "$CHECK" || true
-    die "pyarrow, duckdb, moto and open3d were installed but do not import (see the error above)"
+    die "pyarrow, duckdb, moto, open3d, deltalake and polars were installed but do not import (see the error above)"
 fi
 torch_peers
 echo "install-test-deps: done"
