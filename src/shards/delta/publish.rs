@@ -122,19 +122,22 @@ fn table_schema(ds: &Dataset) -> Result<String> {
     let text = schema_string(&schema).map_err(|e| {
         Error::input(&dataset_file, format!("a {version} dataset cannot be published as a Delta table: {e}; build it into a new folder to get {}", crate::shards::SCHEMA_VERSION))
     })?;
-    if !ds.committed(LABELS_TABLE)?.is_empty() && ds.committed(PAIRS_TABLE)?.is_empty() {
-        return Err(Error::input(ds.root(), "a labels dataset: only `pairs` datasets are published as Delta tables"));
-    }
     Ok(text)
 }
 
-/// The committed `pairs` shards; stops when an entry could not be fetched (it must not count as withdrawn).
+/// The committed `pairs` shards; stops when an entry could not be fetched (it must not count as
+/// withdrawn), and on a labels dataset (no pairs shards, labels shards).
 fn committed_pairs(ds: &Dataset) -> Result<BTreeMap<u64, ManifestEntry>> {
     let scan = ds.scan_manifest()?;
     if let Some(first) = scan.read_errors.first() {
         return Err(Error::Store { url: ds.root().display().to_string(), message: format!("cannot read the manifest to publish it: {first}") });
     }
-    Ok(scan.entries.into_iter().filter(|((t, _), _)| t == PAIRS_TABLE).map(|((_, s), e)| (s, e)).collect())
+    let labels = scan.entries.keys().any(|(t, _)| t == LABELS_TABLE);
+    let pairs: BTreeMap<u64, ManifestEntry> = scan.entries.into_iter().filter(|((t, _), _)| t == PAIRS_TABLE).map(|((_, s), e)| (s, e)).collect();
+    if labels && pairs.is_empty() {
+        return Err(Error::input(ds.root(), "a labels dataset: only `pairs` datasets are published as Delta tables"));
+    }
+    Ok(pairs)
 }
 
 /// Replays into `state` the commits of `_delta_log/` after its version.
