@@ -312,7 +312,8 @@ fn bad_logs_and_datasets_are_refused_naming_the_file() {
     std::fs::write(&v1, "{\"add\": {\"path\": \n").unwrap();
     let e = err(&ds);
     assert!(e.contains("00000000000000000001.json") && e.contains("line 1"), "{e}");
-    std::fs::rename(&v1, log.join("00000000000000000002.json")).unwrap();
+    std::fs::remove_file(&v1).unwrap();
+    std::fs::write(log.join("00000000000000000002.json"), "{\"commitInfo\": {\"timestamp\": 1}}\n").unwrap();
     let e = err(&ds);
     assert!(e.contains("00000000000000000002.json") && e.contains("gap"), "{e}");
     std::fs::remove_file(log.join("00000000000000000002.json")).unwrap();
