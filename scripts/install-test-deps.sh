@@ -12,6 +12,7 @@
 # - npm: azurite, the Azure Blob server tests/azure.rs starts (`azurite-blob`, installed globally; ~20 s
 #   and ~360 MB; it needs Node.js and npm, from Debian when missing).
 # - Debian (apt): slurm-wlm and munge, the one-node Slurm cluster tests/slurm.rs starts (~8 s).
+#   deltalake and polars read the datasets' Delta Lake tables in tests/delta.rs (tests/python/delta_peer.py).
 # `make test` and .ci/run run this first.
 #
 # Idempotent: installs nothing that is already there (Python modules that import, Debian packages that
@@ -29,7 +30,9 @@ OPEN3D_VERSION="0.19.0"
 AZURE_BLOB_VERSION="12.31.1"
 KUBERNETES_VALIDATE_VERSION="1.37.0"
 AZURITE_VERSION="3.37.0"
-CHECK='import pyarrow, duckdb, moto.server, flask, flask_cors, boto3, open3d, azure.storage.blob, kubernetes_validate'
+DELTALAKE_VERSION="1.6.6"
+POLARS_VERSION="2.1.0"
+CHECK='import pyarrow, duckdb, moto.server, flask, flask_cors, boto3, open3d, azure.storage.blob, kubernetes_validate, deltalake, polars'
 
 die() {
     echo "install-test-deps: $*" >&2
@@ -91,7 +94,7 @@ torch_peers() {
 system_deps
 
 if modules_import; then
-    echo "install-test-deps: already installed ($("$PYTHON" -c 'import pyarrow, duckdb, importlib.metadata as m; print("pyarrow", pyarrow.__version__, "duckdb", duckdb.__version__, "moto", m.version("moto"), "open3d", m.version("open3d"), "azure-storage-blob", m.version("azure-storage-blob"), "kubernetes-validate", m.version("kubernetes-validate"))'), azurite $(azurite-blob --version 2>/dev/null), $(slurmctld -V 2>/dev/null))"
+    echo "install-test-deps: already installed ($("$PYTHON" -c 'import pyarrow, duckdb, importlib.metadata as m; print("pyarrow", pyarrow.__version__, "duckdb", duckdb.__version__, "moto", m.version("moto"), "open3d", m.version("open3d"), "azure-storage-blob", m.version("azure-storage-blob"), "kubernetes-validate", m.version("kubernetes-validate"), "deltalake", m.version("deltalake"), "polars", m.version("polars"))'), azurite $(azurite-blob --version 2>/dev/null), $(slurmctld -V 2>/dev/null))"
     torch_peers
     exit 0
 fi
@@ -99,17 +102,18 @@ fi
 command -v "$PYTHON" >/dev/null 2>&1 || die "no Python interpreter '$PYTHON' (set PYTHON=...)"
 "$PYTHON" -m pip --version >/dev/null 2>&1 || die "'$PYTHON -m pip' does not work; install pip first"
 
-echo "install-test-deps: $PYTHON -m pip install pyarrow==$PYARROW_VERSION duckdb==$DUCKDB_VERSION moto[s3]==$MOTO_VERSION flask==$FLASK_VERSION flask-cors==$FLASK_CORS_VERSION open3d==$OPEN3D_VERSION azure-storage-blob==$AZURE_BLOB_VERSION kubernetes-validate==$KUBERNETES_VALIDATE_VERSION"
+echo "install-test-deps: $PYTHON -m pip install pyarrow==$PYARROW_VERSION duckdb==$DUCKDB_VERSION moto[s3]==$MOTO_VERSION flask==$FLASK_VERSION flask-cors==$FLASK_CORS_VERSION open3d==$OPEN3D_VERSION azure-storage-blob==$AZURE_BLOB_VERSION kubernetes-validate==$KUBERNETES_VALIDATE_VERSION deltalake==$DELTALAKE_VERSION polars==$POLARS_VERSION"
 if ! "$PYTHON" -m pip install --disable-pip-version-check -q \
     "pyarrow==$PYARROW_VERSION" "duckdb==$DUCKDB_VERSION" "moto[s3]==$MOTO_VERSION" \
     "flask==$FLASK_VERSION" "flask-cors==$FLASK_CORS_VERSION" "open3d==$OPEN3D_VERSION" \
-    "azure-storage-blob==$AZURE_BLOB_VERSION" "kubernetes-validate==$KUBERNETES_VALIDATE_VERSION"; then
+    "azure-storage-blob==$AZURE_BLOB_VERSION" "kubernetes-validate==$KUBERNETES_VALIDATE_VERSION" \
+    "deltalake==$DELTALAKE_VERSION" "polars==$POLARS_VERSION"; then
     die "pip install failed: is PyPI reachable? (see pip's message above)"
 fi
 
 if ! modules_import; then
     "$PYTHON" -c "$CHECK" || true
-    die "pyarrow, duckdb, moto, open3d, azure-storage-blob and kubernetes-validate were installed but do not import (see the error above)"
+    die "pyarrow, duckdb, moto, open3d, azure-storage-blob, kubernetes-validate, deltalake and polars were installed but do not import (see the error above)"
 fi
 torch_peers
 echo "install-test-deps: done"

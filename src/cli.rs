@@ -36,6 +36,9 @@ pub enum Command {
     Query(commands::query::QueryArgs),
     /// Check every committed shard of a dataset against its manifest entry (size, blake3, schema, rows).
     Verify(commands::verify::VerifyArgs),
+    /// Bring the dataset's Delta Lake table (`_delta_log/`, read by Spark, Trino, Polars, DuckDB, deltalake)
+    /// up to date with its committed shards; rebuilds the log from the manifest when it is missing.
+    Publish(commands::publish::PublishArgs),
     /// List the sequences and frames found under a folder (3DMatch / 7-Scenes / SUN3D, TUM, ScanNet),
     /// checking that every frame decodes.
     Inspect(commands::inspect::InspectArgs),
@@ -77,6 +80,7 @@ impl Cli {
             Command::Inspect(a) => commands::inspect::run(a, out),
             Command::Query(a) => commands::query::run(a, out),
             Command::Verify(a) => commands::verify::run(a, out),
+            Command::Publish(a) => commands::publish::run(a, out),
             Command::Export(a) => commands::export::run(a, out),
             Command::Preview(a) => commands::preview::run(a, out),
             Command::Stats(a) => commands::stats::run(a, out),

@@ -4,6 +4,8 @@ use crate::error::{Error, Result};
 use crate::pipeline::overrides::apply_override;
 use crate::pipeline::{run_build, BuildConfig, BuildOptions};
 use crate::runtime::CancelToken;
+use crate::shards::dataset::Dataset;
+use crate::shards::delta::publish;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
@@ -18,6 +20,10 @@ pub struct BuildArgs {
     pub config: PathBuf,
     #[command(flatten)]
     pub run: RunArgs,
+    /// Do not publish the committed shards to the dataset's Delta Lake table (`_delta_log/`) at the end
+    /// (`pointreggpt publish` does it later).
+    #[arg(long)]
+    pub no_publish: bool,
 }
 
 /// The flags `build` and `labels` share: where the dataset goes, overrides, the worker split.
@@ -126,25 +132,33 @@ pub fn run(args: &BuildArgs, out: &mut dyn Write) -> Result<()> {
     writeln!(out, "rows written: {rows} ({})", if by.is_empty() { "none".into() } else { by.join(", ") }).map_err(w)?;
     writeln!(out, "time {:.1} s, {:.1} pairs/s", r.summary.wall.as_secs_f64(), r.summary.rate()).map_err(w)?;
     write!(out, "{}", r.summary.stage_table()).map_err(w)?;
-    if crate::shards::store::is_remote(&dataset) {
-        writeln!(out, "committed shards: the objects listed in {}/manifest/", dataset.display()).map_err(w)?;
-        writeln!(
-            out,
-            "query it, e.g.: pointreggpt query {} \"select status, count(*) n, avg(overlap_source) ov from pairs group by status\"",
-            dataset.display()
-        )
-        .map_err(w)?;
-    } else {
-        writeln!(out, "committed shards: {}/shards/pairs-*.parquet (listed in {}/manifest/)", dataset.display(), dataset.display()).map_err(w)?;
-        writeln!(
-            out,
-            "query it, e.g.: python3 -c \"import duckdb; print(duckdb.sql(\\\"select status, count(*) n, avg(overlap_source) ov from '{}/shards/pairs-*.parquet' group by status\\\"))\"",
-            dataset.display()
-        )
-        .map_err(w)?;
-    }
+    writeln!(out, "committed shards: listed in {}/manifest/", dataset.display()).map_err(w)?;
+    writeln!(
+        out,
+        "query it, e.g.: pointreggpt query {} \"select status, count(*) n, avg(overlap_source) ov from pairs group by status\"",
+        dataset.display()
+    )
+    .map_err(w)?;
     if r.summary.cancelled {
         return Err(Error::Interrupted);
     }
+    if !args.no_publish {
+        publish_table(&dataset, out)?;
+    }
     Ok(())
+}
+
+/// Publishes the committed shards to the dataset's Delta table (a version-1 dataset has none: said so).
+fn publish_table(dataset: &Path, out: &mut dyn Write) -> Result<()> {
+    let w = |e: std::io::Error| Error::io("<stdout>", e);
+    let ds = Dataset::open(dataset)?;
+    if ds.header().schema_version != crate::shards::SCHEMA_VERSION {
+        writeln!(out, "delta: not published: a {} dataset has unsigned integers, which Delta cannot type", ds.header().schema_version).map_err(w)?;
+        return Ok(());
+    }
+    let report = publish(&ds).map_err(|e| {
+        Error::Store { url: dataset.display().to_string(), message: format!("the shards are committed, but publishing the Delta table failed: {e}; run `pointreggpt publish {}`", dataset.display()) }
+    })?;
+    writeln!(out, "{report}: the dataset is a Delta Lake table, e.g.").map_err(w)?;
+    writeln!(out, "  python3 -c \"import polars as pl; print(pl.read_delta('{}').group_by('status').len())\"", dataset.display()).map_err(w)
 }

@@ -7,6 +7,7 @@ pub mod export;
 pub mod inspect;
 pub mod labels;
 pub mod preview;
+pub mod publish;
 pub mod stats;
 pub mod query;
 pub mod synth;

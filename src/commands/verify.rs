@@ -2,13 +2,16 @@
 
 use crate::error::{Error, Result};
 use crate::shards::dataset::Dataset;
+use crate::shards::delta;
 use std::io::Write;
 use std::path::PathBuf;
 
 #[derive(Debug, clap::Args)]
 #[command(after_help = "The dataset is a folder or an object-store URL (s3://bucket/prefix, gs://…, az://…).\n\
 On an object store, --repair also aborts the multipart uploads of writers that died and removes the shard \
-objects that no manifest entry names and no running writer is writing.")]
+objects that no manifest entry names and no running writer is writing.\n\
+When the dataset has a Delta Lake table (_delta_log/), verify says whether it lists exactly the committed shards, \
+and --repair publishes the withdrawals as a new table version.")]
 pub struct VerifyArgs {
     /// The dataset: a folder or an object-store URL.
     pub dataset: PathBuf,
@@ -35,7 +38,21 @@ pub fn run(args: &VerifyArgs, out: &mut dyn Write) -> Result<()> {
             done.orphans_removed.len()
         )
         .map_err(w)?;
+        // The Delta table follows the manifest in the same run (only a dataset that has one).
+        if delta::status(&ds)?.is_some() {
+            writeln!(out, "{}", delta::publish(&ds)?).map_err(w)?;
+        }
         return Ok(());
+    }
+    match delta::status(&ds)? {
+        Some(s) if s.pending_adds + s.pending_removes > 0 => writeln!(
+            out,
+            "delta: version {} lacks {} committed shards and lists {} withdrawn ones (run `pointreggpt publish`)",
+            s.version, s.pending_adds, s.pending_removes
+        )
+        .map_err(w)?,
+        Some(s) => writeln!(out, "delta: version {} lists exactly the committed shards", s.version).map_err(w)?,
+        None => {}
     }
     if report.is_ok() {
         return Ok(());

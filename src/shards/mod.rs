@@ -8,6 +8,8 @@
 //! <root>/shards/<table>-<shard:06>.parquet      one shard: the rows of a fixed range of work units
 //! <root>/manifest/<table>-<shard:06>.json       one entry per committed shard (ManifestEntry)
 //! <root>/.tmp/<host>~<pid>~<target>~<nonce>.tmp files being written
+//! <root>/_delta_log/<version:020>.json          the Delta Lake table over the committed pairs shards
+//!                                               ([`delta`]: a view of the manifest that publishing keeps current)
 //! ```
 //!
 //! Tables: `pairs` ([`PairRow`], schema `pairs/2`, `schemas/pairs-v2.md`; version-1 datasets are read and
@@ -43,6 +45,7 @@
 pub mod commit;
 pub mod config_diff;
 pub mod dataset;
+pub mod delta;
 pub mod labels;
 pub mod manifest;
 pub mod pairs;

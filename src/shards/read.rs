@@ -94,7 +94,12 @@ impl Dataset {
             let parsed = match text {
                 Ok(Some(t)) => ManifestEntry::parse(&t, &name, &path),
                 Ok(None) => continue, // withdrawn since the listing
-                Err(e) => Err(e),
+                Err(e) => {
+                    if matches!(e, Error::Store { .. } | Error::Io { .. }) {
+                        scan.read_errors.push(e.to_string());
+                    }
+                    Err(e)
+                }
             };
             match parsed {
                 Ok(e) if e.config_hash != self.header.config_hash => scan.unreadable.push((
@@ -116,6 +121,9 @@ impl Dataset {
 pub(crate) struct ManifestScan {
     pub entries: BTreeMap<(String, u64), ManifestEntry>,
     pub unreadable: Vec<(PathBuf, String)>,
+    /// The entries among `unreadable` that could not be fetched (the store or the file system failed),
+    /// as opposed to read and found invalid: a caller that must not take them as withdrawn stops on them.
+    pub read_errors: Vec<String>,
 }
 
 /// The regular files of `dir` with their names, sorted (none if `dir` does not exist).

@@ -67,8 +67,15 @@ impl DatasetStore for LocalStore {
         }
     }
 
+    /// Creates `rel` (and its folder, e.g. `_delta_log/`) without replacing: temporary file, hard link.
     fn create_text(&self, rel: &str, text: &str) -> Result<Published> {
-        write_atomic(&self.tmp_dir(), &self.root.join(rel), text.as_bytes(), Publish::KeepExisting)
+        let target = self.root.join(rel);
+        for dir in [self.tmp_dir(), target.parent().map(Path::to_path_buf).unwrap_or_default()] {
+            if !dir.as_os_str().is_empty() && !dir.is_dir() {
+                fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
+            }
+        }
+        write_atomic(&self.tmp_dir(), &target, text.as_bytes(), Publish::KeepExisting)
     }
 
     fn list(&self, dir: &str) -> Result<Vec<Listed>> {
