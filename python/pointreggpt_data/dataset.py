@@ -20,6 +20,7 @@ from collections import OrderedDict
 import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
+import pyarrow.dataset as pads
 import pyarrow.fs as pafs
 import pyarrow.parquet as pq
 
@@ -142,7 +143,12 @@ class Shard:
         self.path = path
         self.rows = entry["rows"]
         self.schema_version = schema_version
-        self._schema = None
+        self._fragment = None
+
+    def __getstate__(self):
+        state = dict(self.__dict__)
+        state["_fragment"] = None  # re-made (and its footer re-read) in the process that unpickles it
+        return state
 
     def __repr__(self):
         return f"Shard({self.index}, {self.path!r}, rows={self.rows}, {self.schema_version})"
@@ -228,25 +234,32 @@ class Dataset:
 
     # -- reading ----------------------------------------------------------------------------------------
 
+    def fragment(self, shard):
+        """The shard's ``pyarrow.dataset`` fragment; its footer is read once and kept, so each later read
+        of the shard fetches only the column chunks it needs."""
+        if shard._fragment is None:
+            fragment = pads.ParquetFileFormat().make_fragment(shard.path, filesystem=self.filesystem)
+            fragment.ensure_complete_metadata()
+            shard._fragment = fragment
+        return shard._fragment
+
     def shard_schema(self, shard):
-        """The Arrow schema of a shard's file (read from its footer once)."""
-        if shard._schema is None:
-            shard._schema = pq.read_schema(shard.path, filesystem=self.filesystem)
-        return shard._schema
+        """The Arrow schema of a shard's file (from its footer, read once)."""
+        return self.fragment(shard).physical_schema
 
     def shard_has_provenance(self, shard):
         return all(c in self.shard_schema(shard).names for c in PROVENANCE_COLUMNS)
 
     def read_shard(self, shard, columns, filter=None):
-        """The columns ``columns`` of one committed shard (only those are read), rows in file order,
-        keeping those where ``filter`` (a ``pyarrow.compute`` expression) holds. Missing provenance columns
-        of a version-1 shard are left out."""
+        """The columns ``columns`` of one committed shard (only those, and the columns ``filter`` uses, are
+        read), rows in file order, keeping those where ``filter`` (a ``pyarrow.compute`` expression) holds.
+        Missing provenance columns of a version-1 shard are left out."""
         names = self.shard_schema(shard).names
         cols = [c for c in columns if c in names]
         unknown = [c for c in columns if c not in names and c not in PROVENANCE_COLUMNS]
         if unknown:
             raise KeyError(f"{shard.path}: no column(s) {unknown} (columns: {', '.join(names)})")
-        return pq.read_table(shard.path, columns=cols, filters=filter, filesystem=self.filesystem)
+        return self.fragment(shard).to_table(columns=cols, filter=filter)
 
     def tables(self, columns=None, status="ok", scene=None, overlap_source=None, overlap_target=None, where=None):
         """Yields ``(shard, pyarrow.Table)`` shard by shard: the selected rows (``selection_expression``) of
@@ -322,6 +335,7 @@ class DecodedShard:
                 raise DatasetError(f"provenance lists not aligned with target_points in pair(s) {bad[:5]}")
         self.extra = {c: table.column(c).to_pylist() for c in extra}
         self.order = sorted(range(self.n), key=lambda i: self.unit_index[i])
+        self.row_of = {u: i for i, u in enumerate(self.unit_index)}
 
     def pair(self, i):
         s0, s1 = self.source_off[i], self.source_off[i + 1]

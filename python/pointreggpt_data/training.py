@@ -49,21 +49,21 @@ class PairDataset(_Base):
         self.columns = list(columns)
         self.cache_shards = cache_shards
         self._filter = selection_expression(status, scene, overlap_source, overlap_target, where)
-        index = []  # (unit_index, shard position, row position among the shard's selected rows)
+        index = []  # (unit_index, shard position)
         for k, shard in enumerate(self.dataset.shards):
             units = self.dataset.read_shard(shard, ["unit_index"], self._filter).column("unit_index").to_pylist()
-            index.extend((int(u), k, r) for r, u in enumerate(units))
+            index.extend((int(u), k) for u in units)
         index.sort()
-        self.unit_index = [u for u, _, _ in index]
-        self._where = [(k, r) for _, k, r in index]
+        self.unit_index = [u for u, _ in index]
+        self._shard = [k for _, k in index]
         self._cache = None
 
     def __len__(self):
-        return len(self._where)
+        return len(self.unit_index)
 
     def shard_of(self, i):
         """The position (in ``dataset.shards``) of the shard holding item ``i``."""
-        return self._where[i][0]
+        return self._shard[i]
 
     def _decoded(self, k):
         if self._cache is None:  # made lazily, so each DataLoader worker process has its own
@@ -78,11 +78,11 @@ class PairDataset(_Base):
             i += len(self)
         if not 0 <= i < len(self):
             raise IndexError(i)
-        k, r = self._where[i]
-        decoded = self._decoded(k)
-        item = decoded.pair(r)
-        if item["unit_index"] != self.unit_index[i]:
-            raise RuntimeError(f"shard {self.dataset.shards[k].path} changed since the index was built")
+        k, unit = self._shard[i], self.unit_index[i]
+        row = self._decoded(k).row_of.get(unit)
+        if row is None:
+            raise RuntimeError(f"shard {self.dataset.shards[k].path} has no unit {unit} any more: it changed since the index was built")
+        item = self._decoded(k).pair(row)
         if self.tensors:
             for key, value in item.items():
                 if isinstance(value, np.ndarray):
