@@ -6,12 +6,15 @@
 # build, ~3 GB to download, 4.6 GB installed, 54 s here; it runs on the CPU). `make test` and .ci/run run
 # this first. open3d 0.19.0 (with Debian's libusb-1.0-0, which its import may need) is the peer of
 # tests/registration.rs (normals, FPFH, RANSAC; tests/python/open3d_registration.py): a ~450 MB wheel.
+# Last, the project's own Python package, python/ (pointreggpt_data, checked by tests/python_package.rs),
+# with `pip install ./python`, reinstalled whenever the installed copy differs from python/.
 #
 # Idempotent: installs nothing that already imports.
 # PYTHON selects the interpreter (default python3).
 set -euo pipefail
 
 PYTHON="${PYTHON:-python3}"
+ROOT="$(cd "$(dirname "$0")/.." && pwd)"
 PYARROW_VERSION="26.0.1"
 DUCKDB_VERSION="2.0.0"
 MOTO_VERSION="5.2.1"
@@ -52,9 +55,35 @@ torch_peers() {
     PYTHON="$PYTHON" "$(dirname "$0")/install-network-peers.sh"
 }
 
+# Whether the installed pointreggpt_data has exactly the files of python/pointreggpt_data (run outside
+# the checkout, so that the import finds the installed copy).
+package_current() {
+    (cd / && "$PYTHON" - "$ROOT/python/pointreggpt_data" >/dev/null 2>&1) <<'PY'
+import filecmp, os, sys
+import pointreggpt_data
+source, installed = sys.argv[1], os.path.dirname(pointreggpt_data.__file__)
+names = [n for n in os.listdir(source) if n.endswith(".py")]
+same = all(os.path.exists(os.path.join(installed, n)) and filecmp.cmp(os.path.join(source, n), os.path.join(installed, n), shallow=False) for n in names)
+sys.exit(0 if names and same else 1)
+PY
+}
+
+install_package() {
+    if package_current; then
+        echo "install-test-deps: pointreggpt_data (python/) already installed"
+        return 0
+    fi
+    echo "install-test-deps: $PYTHON -m pip install ./python (pointreggpt_data)"
+    "$PYTHON" -m pip install --disable-pip-version-check -q --no-deps --force-reinstall "$ROOT/python" ||
+        die "pip install ./python failed (see pip's message above; building it needs setuptools from PyPI)"
+    rm -rf "$ROOT/python/build" "$ROOT/python/"*.egg-info
+    package_current || die "pointreggpt_data was installed but does not import, or differs from python/"
+}
+
 if modules_import; then
     echo "install-test-deps: already installed ($("$PYTHON" -c 'import pyarrow, duckdb, importlib.metadata as m; print("pyarrow", pyarrow.__version__, "duckdb", duckdb.__version__, "moto", m.version("moto"), "open3d", m.version("open3d"))'))"
     torch_peers
+    install_package
     exit 0
 fi
 
@@ -74,4 +103,5 @@ if ! modules_import; then
     die "pyarrow, duckdb, moto and open3d were installed but do not import (see the error above)"
 fi
 torch_peers
+install_package
 echo "install-test-deps: done"
