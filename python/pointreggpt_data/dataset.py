@@ -13,6 +13,8 @@ as Python ints, and ``None`` provenance for version 1.
 """
 
 import json
+import os
+import pickle
 import posixpath
 import re
 from collections import OrderedDict
@@ -177,6 +179,7 @@ class Dataset:
         self.has_provenance = self.schema_version != "pairs/1"
         self.shards = self._read_manifest()
         self.num_rows = sum(s.rows for s in self.shards)
+        self._pid = os.getpid()
 
     # -- layout -----------------------------------------------------------------------------------------
 
@@ -234,9 +237,34 @@ class Dataset:
 
     # -- reading ----------------------------------------------------------------------------------------
 
+    def _check_process(self):
+        """In a process forked after this dataset was opened (a DataLoader worker with the default "fork"
+        start on Linux), a fresh filesystem client and fragments: a store client's pooled connections must
+        not be shared with the parent. Azure's SDK keeps its connection pool process-wide, so a forked
+        process cannot get a clean one: refused with the remedy (spawned workers unpickle the dataset,
+        which makes a new client; see ``__setstate__``)."""
+        if self._pid == os.getpid():
+            return
+        azure = getattr(pafs, "AzureFileSystem", None)
+        if azure is not None and isinstance(self.filesystem, azure):
+            raise DatasetError(
+                f"{self.url}: an az:// dataset cannot be read in a forked process (the Azure SDK's connection pool "
+                "is shared with the parent and mixes up responses): give the DataLoader multiprocessing_context='spawn' "
+                "(or 'forkserver'), or num_workers=0"
+            )
+        self.filesystem = pickle.loads(pickle.dumps(self.filesystem))  # pyarrow filesystems rebuild from their options
+        for s in self.shards:
+            s._fragment = None
+        self._pid = os.getpid()
+
+    def __setstate__(self, state):
+        self.__dict__.update(state)
+        self._pid = os.getpid()  # unpickled: the filesystem client was just made in this process
+
     def fragment(self, shard):
         """The shard's ``pyarrow.dataset`` fragment; its footer is read once and kept, so each later read
         of the shard fetches only the column chunks it needs."""
+        self._check_process()
         if shard._fragment is None:
             fragment = pads.ParquetFileFormat().make_fragment(shard.path, filesystem=self.filesystem)
             fragment.ensure_complete_metadata()

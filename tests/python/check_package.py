@@ -241,7 +241,8 @@ def check_loader(ds, kwargs, by_key, version, workers):
     sampler.set_epoch(1)
     assert sorted(sampler) == list(range(len(train)))
     sampler.set_epoch(0)
-    loader = torch.utils.data.DataLoader(train, batch_size=3, sampler=sampler, collate_fn=prd.collate, num_workers=workers)
+    context = os.environ.get("CHECK_PACKAGE_LOADER_CONTEXT") if workers else None  # "spawn" for az:// (manual runs)
+    loader = torch.utils.data.DataLoader(train, batch_size=3, sampler=sampler, collate_fn=prd.collate, num_workers=workers, multiprocessing_context=context)
     seen, batches = [], 0
     for b in loader:
         batches += 1
