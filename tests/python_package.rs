@@ -119,6 +119,7 @@ fn check(mut plan: Value, r: &Reference, dir: &Path, env: &[(&str, String)]) -> 
     assert_eq!(report["loader"]["pairs"], r.ok, "{report}");
     let sizes: Vec<usize> = r.filters.iter().map(|f| f["keys"].as_array().unwrap().len()).collect();
     assert_eq!(report["filters"], json!(sizes), "{report}");
+    assert_eq!(report["store_parsing"], true, "{report}");
     report
 }
 

@@ -280,6 +280,45 @@ def check_loader(ds, kwargs, by_key, version, workers):
     return {"batches": batches, "pairs": len(seen), "workers": workers}
 
 
+def check_store_parsing():
+    """URL forms and option spellings, without a server (constructing a client connects nowhere)."""
+    key = "a2V5"
+    fs, base = prd.filesystem_for("abfss://box@acct.dfs.core.windows.net/some/prefix/", {"account_key": key, "endpoint": "http://127.0.0.1:9"})
+    args = fs.__reduce__()[1][0]
+    assert base == "box/some/prefix" and args["account_name"] == "acct" and args["account_key"] == key, (base, args)
+    assert (args["blob_storage_authority"], args["blob_storage_scheme"]) == ("127.0.0.1:9", "http"), args
+    fs, base = prd.filesystem_for("az://box", {"account_name": "other", "sas_token": "sv=1"})
+    assert base == "box" and fs.__reduce__()[1][0]["sas_token"] == "sv=1"
+    saved = {k: os.environ.pop(k) for k in list(os.environ) if k.startswith("AZURE_STORAGE")}
+    try:
+        prd.filesystem_for("az://box/p")
+        raise AssertionError("an az:// URL without an account was accepted")
+    except prd.StoreError as e:
+        assert "account_name" in str(e)
+    finally:
+        os.environ.update(saved)
+    fs, base = prd.filesystem_for("s3a://bucket/deep/prefix", {"aws_endpoint": "http://127.0.0.1:9", "aws_access_key_id": "k", "aws_secret_access_key": "s", "aws_region": "eu-west-1"})
+    assert base == "bucket/deep/prefix" and fs.region == "eu-west-1", (base, fs.region)
+    assert "127.0.0.1:9" in str(fs.__reduce__()), fs.__reduce__()
+    for bad, why in [("s3:///prefix", "no bucket"), ("ftp://host/x", "unknown URL scheme")]:
+        try:
+            prd.filesystem_for(bad)
+            raise AssertionError(f"{bad} was accepted")
+        except prd.StoreError as e:
+            assert why in str(e), e
+    try:
+        prd.filesystem_for("/tmp/x", {"access_key": "k"})
+        raise AssertionError("storage_options for a folder were accepted")
+    except prd.StoreError:
+        pass
+    try:
+        prd.open_dataset(os.path.dirname(os.path.abspath(__file__)))
+        raise AssertionError("a folder without dataset.toml opened")
+    except prd.DatasetError as e:
+        assert "no dataset.toml" in str(e)
+    return True
+
+
 def main():
     if len(sys.argv) != 2:
         sys.exit("usage: check_package.py <plan.json>")
@@ -347,11 +386,7 @@ def main():
         p = next(env_ds.pairs(status=None))
         check_pair(p, ref[0], version, "environment credentials")
         report["env"] = True
-    try:
-        prd.open_dataset("ftp://host/x")
-        raise AssertionError("an unknown scheme was accepted")
-    except prd.StoreError as e:
-        assert "unknown URL scheme" in str(e)
+    report["store_parsing"] = check_store_parsing()
     print(json.dumps(report))
 
 
