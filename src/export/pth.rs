@@ -20,7 +20,7 @@
 //! data to a multiple of 64 bytes; the central directory is followed by a zip64 end record, its locator
 //! and the classic end record. The pickle names numpy's `numpy.core.multiarray._reconstruct` (as files
 //! saved with numpy 1.x do), which both numpy 1.x and 2.x load; `torch.save` under numpy 2 writes
-//! `numpy._core.multiarray`, which numpy 1.x cannot load.
+//! `numpy._core.multiarray`, which numpy before 1.26 cannot load (checked with numpy 1.24.4 and 1.26.4).
 //!
 //! The serialization id (random in PyTorch) is derived from the pickle's bytes here, so an export is
 //! byte-for-byte reproducible.
