@@ -13,6 +13,8 @@
 #   and ~360 MB; it needs Node.js and npm, from Debian when missing).
 # - Debian (apt): slurm-wlm and munge, the one-node Slurm cluster tests/slurm.rs starts (~8 s).
 #   deltalake and polars read the datasets' Delta Lake tables in tests/delta.rs (tests/python/delta_peer.py).
+# - Last, the project's own Python package, python/ (pointreggpt_data, checked by tests/python_package.rs),
+#   with `pip install ./python`, reinstalled whenever the installed copy differs from python/.
 # `make test` and .ci/run run this first.
 #
 # Idempotent: installs nothing that is already there (Python modules that import, Debian packages that
@@ -21,6 +23,7 @@
 set -euo pipefail
 
 PYTHON="${PYTHON:-python3}"
+ROOT="$(cd "$(dirname "$0")/.." && pwd)"
 PYARROW_VERSION="26.0.1"
 DUCKDB_VERSION="2.0.0"
 MOTO_VERSION="5.2.1"
@@ -93,9 +96,35 @@ torch_peers() {
 
 system_deps
 
+# Whether the installed pointreggpt_data has exactly the files of python/pointreggpt_data (run outside
+# the checkout, so that the import finds the installed copy).
+package_current() {
+    (cd / && "$PYTHON" - "$ROOT/python/pointreggpt_data" >/dev/null 2>&1) <<'PY'
+import filecmp, os, sys
+import pointreggpt_data
+source, installed = sys.argv[1], os.path.dirname(pointreggpt_data.__file__)
+names = [n for n in os.listdir(source) if n.endswith(".py")]
+same = all(os.path.exists(os.path.join(installed, n)) and filecmp.cmp(os.path.join(source, n), os.path.join(installed, n), shallow=False) for n in names)
+sys.exit(0 if names and same else 1)
+PY
+}
+
+install_package() {
+    if package_current; then
+        echo "install-test-deps: pointreggpt_data (python/) already installed"
+        return 0
+    fi
+    echo "install-test-deps: $PYTHON -m pip install ./python (pointreggpt_data)"
+    "$PYTHON" -m pip install --disable-pip-version-check -q --no-deps --force-reinstall "$ROOT/python" ||
+        die "pip install ./python failed (see pip's message above; building it needs setuptools from PyPI)"
+    rm -rf "$ROOT/python/build" "$ROOT/python/"*.egg-info
+    package_current || die "pointreggpt_data was installed but does not import, or differs from python/"
+}
+
 if modules_import; then
     echo "install-test-deps: already installed ($("$PYTHON" -c 'import pyarrow, duckdb, importlib.metadata as m; print("pyarrow", pyarrow.__version__, "duckdb", duckdb.__version__, "moto", m.version("moto"), "open3d", m.version("open3d"), "azure-storage-blob", m.version("azure-storage-blob"), "kubernetes-validate", m.version("kubernetes-validate"), "deltalake", m.version("deltalake"), "polars", m.version("polars"))'), azurite $(azurite-blob --version 2>/dev/null), $(slurmctld -V 2>/dev/null))"
     torch_peers
+    install_package
     exit 0
 fi
 
@@ -116,4 +145,5 @@ if ! modules_import; then
     die "pyarrow, duckdb, moto, open3d, azure-storage-blob, kubernetes-validate, deltalake and polars were installed but do not import (see the error above)"
 fi
 torch_peers
+install_package
 echo "install-test-deps: done"

@@ -1,11 +1,13 @@
 //! `export`, `preview` and `stats` end to end on a small synthetic dataset: every export format read
-//! back (Rust readers and Python: numpy PLY parser, pickle, np.load), ground-truth alignment, the
+//! back (Rust readers and Python: numpy PLY parser, pickle, GeoTransformer's torch.load of the .pth clouds,
+//! np.load), ground-truth alignment, the
 //! official gt.log keep rule, SQL `--where`/`--limit` against rows filtered in Rust and DuckDB, `stats`
 //! counts against the same, PNG outputs, and the pyarrow `PairDataset` of tests/python/pair_dataset.py.
 
 mod support;
 
 use pointreggpt::export::npy::read_npy_points;
+use pointreggpt::export::pth::encode_pth_points;
 use pointreggpt::export::pointreggpt::official_keep;
 use pointreggpt::export::PairWriter;
 use pointreggpt::geometry::Point;
@@ -74,6 +76,8 @@ fn every_format_reads_back_and_agrees_with_the_rows() {
     assert!(line.contains(&format!("wrote {} pairs (pointreggpt format)", ok.len())), "{line}");
     assert!(line.contains(&format!("{} matching rows not ok, skipped", rows.len() - ok.len())), "{line}");
     export(&ds, "geotransformer", &geo, &[]);
+    let geo_npy = dir.path().join("geo-npy");
+    export(&ds, "geotransformer", &geo_npy, &["--cloud-format", "npy"]);
     export(&ds, "ply", &ply, &[]);
 
     // The authors' layout, read with our own readers.
@@ -94,12 +98,21 @@ fn every_format_reads_back_and_agrees_with_the_rows() {
     assert_eq!(gt, want_gt);
     assert!(!gt.is_empty());
 
-    // GeoTransformer's .npy clouds and PLY pairs (every row, rejected ones too).
+    // GeoTransformer's .pth clouds (default) and .npy clouds (--cloud-format npy), and PLY pairs (every
+    // row, rejected ones too).
     for (k, r) in ok.iter().enumerate() {
-        let d = geo.join("data/train").join(&r.scene);
+        let d = geo_npy.join("data/train").join(&r.scene);
         assert_eq!(read_npy_points(&d.join(format!("cloud_bin_{}.npy", 2 * k))).unwrap(), r.target_points);
         assert_eq!(read_npy_points(&d.join(format!("cloud_bin_{}.npy", 2 * k + 1))).unwrap(), r.source_points);
+        let d = geo.join("data/train").join(&r.scene);
+        for (i, cloud) in [(2 * k, &r.target_points), (2 * k + 1, &r.source_points)] {
+            let name = format!("cloud_bin_{i}");
+            assert_eq!(std::fs::read(d.join(format!("{name}.pth"))).unwrap(), encode_pth_points(&name, cloud));
+            assert!(!d.join(format!("{name}.npy")).exists());
+        }
     }
+    let (ok_flag, _, stderr) = run(&["export", ds.to_str().unwrap(), "--format", "ply", "--cloud-format", "npy", "--out", dir.path().join("x").to_str().unwrap()]);
+    assert!(!ok_flag && stderr.contains("--cloud-format"), "{stderr}");
     assert_eq!(exported_keys(&ply), keys(&rows));
     for r in &rows {
         let d = ply.join(r.pair_key.replace(['/', '#'], "_"));
@@ -109,17 +122,25 @@ fn every_format_reads_back_and_agrees_with_the_rows() {
 
     // Python: numpy PLY parser, np.loadtxt, pickle.load, np.load and the alignment check.
     let plan = json!({
-        "pointreggpt": official, "geotransformer": geo, "ply": ply,
+        "pointreggpt": official, "geotransformer": geo, "geotransformer_npy": geo_npy, "ply": ply,
         "exported": keys(ok.iter().copied()), "ply_exported": keys(&rows),
     });
     let plan_path = dir.path().join("plan.json");
     std::fs::write(&plan_path, plan.to_string()).unwrap();
     let o = support::python_command().arg(script("check_exports.py")).arg(&ds).arg(&plan_path).output().unwrap();
-    assert!(o.status.success(), "check_exports.py failed (numpy and pyarrow are required: scripts/install-test-deps.sh):\n{}", String::from_utf8_lossy(&o.stderr));
+    assert!(o.status.success(), "check_exports.py failed (numpy, pyarrow and torch are required: scripts/install-test-deps.sh):\n{}", String::from_utf8_lossy(&o.stderr));
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(v["pointreggpt"]["scenes"], ok.len());
-    assert_eq!(v["geotransformer"]["entries"], ok.len());
-    assert_eq!(v["geotransformer"]["overlaps_bit_exact"], ok.len());
+    for geo in ["geotransformer", "geotransformer_npy"] {
+        assert_eq!(v[geo]["entries"], ok.len(), "{v}");
+        assert_eq!(v[geo]["overlaps_bit_exact"], ok.len(), "{v}");
+    }
+    // torch.load read every .pth cloud; the files compared with torch.save's record by record; torch's
+    // default weights_only=True refuses them (as GeoTransformer's own files), the documented allow-list not.
+    assert_eq!(v["geotransformer"]["clouds"], "pth");
+    assert_eq!(v["geotransformer"]["compared_with_torch_save"], 2 * ok.len().min(2), "{v}");
+    assert_eq!(v["geotransformer"]["pickle_module"], "numpy.core.multiarray", "{v}");
+    assert_eq!(v["geotransformer"]["weights_only_default_refuses"], true, "{v}");
     assert_eq!(v["ply"]["pairs"], rows.len());
 }
 

@@ -1,6 +1,7 @@
 //! `pointreggpt export`: write a dataset's pairs in a layout registration trainers read.
 
 use crate::error::{Error, Result};
+use crate::export::geotransformer::CloudFormat;
 use crate::export::{export, ExportOptions, Filter, Format};
 use crate::shards::dataset::Dataset;
 use std::io::Write;
@@ -27,6 +28,11 @@ pub struct ExportArgs {
     /// Write at most N pairs.
     #[arg(long, value_name = "N")]
     pub limit: Option<usize>,
+    /// geotransformer: the clouds' file format. pth = numpy arrays in torch.save's zip format, read by
+    /// GeoTransformer's loader unmodified (torch.load(path, weights_only=False) on PyTorch >= 2.6, as for
+    /// its own 3DMatch files); npy = np.load files.
+    #[arg(long, value_enum, default_value = "pth")]
+    pub cloud_format: CloudFormat,
     /// No progress bar.
     #[arg(long)]
     pub no_progress: bool,
@@ -36,7 +42,17 @@ pub fn run(args: &ExportArgs, out: &mut dyn Write) -> Result<()> {
     let w = |e: std::io::Error| Error::io("<stdout>", e);
     let filter = Filter::parse_opt(args.filter.as_deref())?;
     let ds = Dataset::open(&args.dataset)?;
-    let opts = ExportOptions { format: args.format, out: args.out.clone(), filter, limit: args.limit, progress: !args.no_progress };
+    if args.cloud_format != CloudFormat::Pth && args.format != Format::Geotransformer {
+        return Err(Error::config("--cloud-format", "only the geotransformer format has a cloud format"));
+    }
+    let opts = ExportOptions {
+        format: args.format,
+        out: args.out.clone(),
+        filter,
+        limit: args.limit,
+        cloud_format: args.cloud_format,
+        progress: !args.no_progress,
+    };
     let r = export(&ds, &opts)?;
     let format = format!("{:?}", args.format).to_lowercase();
     let mut extra = Vec::new();

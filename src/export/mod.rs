@@ -1,5 +1,5 @@
 //! Export a dataset's pairs to the layouts registration trainers read: the PointRegGPT authors' layout
-//! (`pointreggpt`), GeoTransformer's 3DMatch pickle + `.npy` (`geotransformer`), or plain PLY pairs
+//! (`pointreggpt`), GeoTransformer's 3DMatch pickle + `.pth` clouds (`geotransformer`), or plain PLY pairs
 //! (`ply`). Rows stream shard by shard, selected by a SQL `--where` predicate ([`filter`]) and a limit.
 //!
 //! The training formats take `ok` rows only (others that match the filter are counted as skipped);
@@ -10,6 +10,7 @@ pub mod filter;
 pub mod geotransformer;
 pub mod npy;
 pub mod pickle;
+pub mod pth;
 pub mod pointreggpt;
 pub mod ply;
 pub mod rows;
@@ -26,7 +27,8 @@ pub enum Format {
     /// The authors' layout: `data/scene-XXXXXX/sample-00000{0,1}.cloud.ply` in the source frame,
     /// `sample-000001.pose.txt`, `camera-intrinsics.txt`, and `metadata/gt.log`.
     Pointreggpt,
-    /// GeoTransformer's 3DMatch layout: `metadata/train.pkl` and `data/train/<scene>/cloud_bin_<i>.npy`.
+    /// GeoTransformer's 3DMatch layout: `metadata/train.pkl` and `data/train/<scene>/cloud_bin_<i>.pth`
+    /// (numpy arrays in torch.save's format; `--cloud-format npy` for `.npy`).
     Geotransformer,
     /// `<pair>/source.ply`, `target.ply` (each in its own camera frame) and `T_target_from_source.txt`.
     Ply,
@@ -42,6 +44,8 @@ pub struct ExportOptions {
     pub filter: Filter,
     /// Write at most this many pairs.
     pub limit: Option<usize>,
+    /// `geotransformer` only: the clouds' file format (`.pth` for `torch.load` by default).
+    pub cloud_format: geotransformer::CloudFormat,
     /// Draw a progress bar on stderr (when it is a terminal).
     pub progress: bool,
 }
@@ -77,7 +81,7 @@ pub fn export(ds: &Dataset, opts: &ExportOptions) -> Result<ExportReport> {
     rows::create_empty_dir(&opts.out)?;
     let mut writer: Box<dyn PairWriter> = match opts.format {
         Format::Pointreggpt => Box::new(pointreggpt::PointRegGptWriter::new(&opts.out)),
-        Format::Geotransformer => Box::new(geotransformer::GeoTransformerWriter::new(&opts.out)),
+        Format::Geotransformer => Box::new(geotransformer::GeoTransformerWriter::new(&opts.out, opts.cloud_format)),
         Format::Ply => Box::new(ply::PlyWriter::new(&opts.out)),
     };
     let bar = crate::runtime::progress::bar(rows::committed_row_count(ds)?, opts.progress, "export");

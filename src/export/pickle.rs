@@ -1,9 +1,10 @@
-//! A minimal Python pickle writer (protocol 2): strings, ints, floats, lists, dicts and numpy float64
-//! arrays, enough for GeoTransformer's `metadata/*.pkl` without Python in the product path.
+//! A minimal Python pickle writer (protocol 2): strings, ints, floats, lists, dicts and numpy float64,
+//! float32 and int8 arrays, enough for GeoTransformer's `metadata/*.pkl` and its `.pth` clouds (pth.rs)
+//! without Python in the product path.
 //!
 //! Arrays use the opcode sequence numpy itself emits for protocol 2 (`ndarray.__reduce__`):
 //! `numpy.core.multiarray._reconstruct(numpy.ndarray, (0,), b'b')`, then BUILD with the state
-//! `(1, shape, dtype('<f8'), False, raw_bytes)`, where `dtype` is itself rebuilt with its own BUILD state
+//! `(1, shape, dtype('<f8'), False, raw_bytes)` (`'<f4'`, `'|i1'`), where `dtype` is itself rebuilt with its own BUILD state
 //! and the bytes come from `_codecs.encode(<latin-1 text>, 'latin1')` (protocol 2 has no bytes opcode).
 //! `numpy.core.multiarray` loads without a warning in numpy 1.x and 2.x. No memo is written.
 
@@ -20,6 +21,10 @@ pub enum Value {
     Dict(Vec<(String, Value)>),
     /// A C-ordered numpy float64 array; `data.len()` is the product of `shape`.
     ArrayF64 { shape: Vec<usize>, data: Vec<f64> },
+    /// A C-ordered numpy float32 array.
+    ArrayF32 { shape: Vec<usize>, data: Vec<f32> },
+    /// A C-ordered numpy int8 array.
+    ArrayI8 { shape: Vec<usize>, data: Vec<i8> },
 }
 
 const PROTO: u8 = 0x80;
@@ -89,7 +94,17 @@ fn write_value(out: &mut Vec<u8>, v: &Value) {
         Value::ArrayF64 { shape, data } => {
             assert_eq!(shape.iter().product::<usize>(), data.len(), "array data does not match its shape");
             let bytes: Vec<u8> = data.iter().flat_map(|x| x.to_le_bytes()).collect();
-            write_array(out, shape, "f8", &bytes);
+            write_array(out, shape, "f8", "<", &bytes);
+        }
+        Value::ArrayF32 { shape, data } => {
+            assert_eq!(shape.iter().product::<usize>(), data.len(), "array data does not match its shape");
+            let bytes: Vec<u8> = data.iter().flat_map(|x| x.to_le_bytes()).collect();
+            write_array(out, shape, "f4", "<", &bytes);
+        }
+        Value::ArrayI8 { shape, data } => {
+            assert_eq!(shape.iter().product::<usize>(), data.len(), "array data does not match its shape");
+            let bytes: Vec<u8> = data.iter().map(|&x| x as u8).collect();
+            write_array(out, shape, "i1", "|", &bytes); // one byte: no byte order
         }
     }
 }
@@ -145,8 +160,9 @@ fn write_tuple_of_ints(out: &mut Vec<u8>, xs: &[usize]) {
     }
 }
 
-/// The numpy protocol-2 sequence for a little-endian C-ordered array of dtype `code` (`f8`, `f4`).
-fn write_array(out: &mut Vec<u8>, shape: &[usize], code: &str, raw: &[u8]) {
+/// The numpy protocol-2 sequence for a C-ordered array of dtype `code` (`f8`, `f4`, `i1`) with byte
+/// order `order` (`<` little-endian, `|` not applicable), `raw` its data in that order.
+fn write_array(out: &mut Vec<u8>, shape: &[usize], code: &str, order: &str, raw: &[u8]) {
     write_global(out, "numpy.core.multiarray", "_reconstruct");
     write_global(out, "numpy", "ndarray");
     write_tuple_of_ints(out, &[0]);
@@ -155,12 +171,12 @@ fn write_array(out: &mut Vec<u8>, shape: &[usize], code: &str, raw: &[u8]) {
     out.push(MARK);
     write_int(out, 1);
     write_tuple_of_ints(out, shape);
-    // dtype(code, False, True) with state (3, '<', None, None, None, -1, -1, 0).
+    // dtype(code, False, True) with state (3, order, None, None, None, -1, -1, 0).
     write_global(out, "numpy", "dtype");
     write_str(out, code);
     out.extend_from_slice(&[NEWFALSE, NEWTRUE, TUPLE3, REDUCE, MARK]);
     write_int(out, 3);
-    write_str(out, "<");
+    write_str(out, order);
     out.extend_from_slice(&[NONE, NONE, NONE]);
     write_int(out, -1);
     write_int(out, -1);

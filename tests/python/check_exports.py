@@ -3,14 +3,17 @@
 rows the build wrote (read from the committed shards with pyarrow, see pair_dataset.py).
 
 Usage: check_exports.py <dataset> <plan.json>
-plan.json: {"pointreggpt": dir, "geotransformer": dir, "ply": dir,
+plan.json: {"pointreggpt": dir, "geotransformer": dir (default .pth clouds), "geotransformer_npy": dir
+            (--cloud-format npy), "ply": dir,
             "exported": [pair keys the training formats hold, in order], "ply_exported": [pair keys in the ply export]}
 
 Checks: PLY clouds (a small numpy PLY parser) and the target clouds' per-point provenance (vertex properties
 `known_share`/`view` in the PLY formats, `.known_share.npy`/`.view.npy` in GeoTransformer's) against the
 `target_known_share`/`target_view` columns, poses and intrinsics (np.loadtxt), gt.log lines (format and
-the official keep rule), the GeoTransformer pickle (pickle.load, numpy arrays, warnings as errors), the .npy
-clouds (np.load), and ground-truth alignment: with the stored transform, the fraction of target points
+the official keep rule), the GeoTransformer export as GeoTransformer's own loader reads it (pickle.load of
+metadata/train.pkl, numpy arrays, warnings as errors; then torch.load(osp.join(data_root, pcd),
+weights_only=False) of each .pth cloud: a zip archive laid out as torch.save's, compared record by record
+with a file torch.save writes), the .npy clouds of --cloud-format npy (np.load), and ground-truth alignment: with the stored transform, the fraction of target points
 with a source point closer than 3.75 cm equals the stored overlap_target (brute force nearest neighbours).
 Prints one JSON object; exits non-zero (AssertionError) on any mismatch. Run by tests/export.rs.
 """
@@ -19,6 +22,7 @@ import os
 import pickle
 import re
 import sys
+import tempfile
 import warnings
 
 try:
@@ -156,16 +160,76 @@ def check_pointreggpt(root, rows, keys):
     return {"scenes": len(tsv), "gt_log_lines": len(lines), "max_overlap_error_shared_frame": worst}
 
 
-def check_geotransformer(root, rows, keys):
-    with open(os.path.join(root, "metadata", "train.pkl"), "rb") as f:
+def load_torch():
+    try:
+        import torch
+    except ImportError as e:  # a missing torch is a failure, not a skip
+        sys.exit(f"check_exports.py needs torch for the .pth clouds ({e}): scripts/install-test-deps.sh")
+    return torch
+
+
+def compare_with_torch_save(path, array, torch, tmp):
+    """Our .pth file against the file torch.save(array) writes: the same records (under each file's own
+    archive folder), the same small records, the same zip entry fields, every record's data at a multiple
+    of 64 bytes, and data.pkl unpickling to the same array. Returns the pickle's numpy module."""
+    import zipfile
+
+    theirs_path = os.path.join(tmp, os.path.basename(path))
+    torch.save(array, theirs_path)
+    ours, theirs = zipfile.ZipFile(path), zipfile.ZipFile(theirs_path)
+    stem = os.path.basename(path)[: -len(".pth")]
+    names = [i.filename for i in ours.infolist()]
+    assert names == [i.filename for i in theirs.infolist()], (names, theirs.namelist())
+    assert all(n.startswith(stem + "/") for n in names), names
+    assert ours.testzip() is None, "a record's CRC-32 differs"
+    raw = open(path, "rb").read()
+    for a, b in zip(ours.infolist(), theirs.infolist()):
+        fields = ("compress_type", "flag_bits", "date_time", "create_system", "create_version", "extract_version", "external_attr", "internal_attr")
+        assert [getattr(a, f) for f in fields] == [getattr(b, f) for f in fields], (a.filename, [getattr(a, f) for f in fields], [getattr(b, f) for f in fields])
+        name_len, extra_len = int.from_bytes(raw[a.header_offset + 26:a.header_offset + 28], "little"), int.from_bytes(raw[a.header_offset + 28:a.header_offset + 30], "little")
+        assert (a.header_offset + 30 + name_len + extra_len) % 64 == 0, f"{a.filename}: data not 64-aligned"
+        assert raw[a.header_offset + 30 + name_len:a.header_offset + 32 + name_len] == b"FB"
+        if not a.filename.endswith(("data.pkl", "serialization_id")):
+            assert ours.read(a) == theirs.read(b), a.filename
+    serial = ours.read(stem + "/.data/serialization_id")
+    assert len(serial) == 40 and serial.isdigit(), serial
+    pkl = ours.read(stem + "/data.pkl")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        back = pickle.loads(pkl)
+    assert isinstance(back, np.ndarray) and back.dtype == array.dtype and np.array_equal(back, array)
+    assert pkl[:3] == b"\x80\x02c", pkl[:3]  # protocol 2, then GLOBAL '<module>\n_reconstruct\n'
+    return pkl[3:].split(b"\n", 1)[0].decode()
+
+
+def check_geotransformer(root, rows, keys, loader="pth", tmp=None):
+    """GeoTransformer's ThreeDMatchPairDataset reading path: metadata_root = <root>/metadata, data_root =
+    <root>/data, metadata_list = pickle.load(...), then for each entry torch.load(osp.join(data_root,
+    metadata['pcd0'])) (weights_only=False, which PyTorch >= 2.6 needs for numpy arrays) - or np.load for
+    the .npy export - giving exactly the rows' clouds, and rotation/translation the rows' transform."""
+    torch = load_torch() if loader == "pth" else None
+    metadata_root, data_root = os.path.join(root, "metadata"), os.path.join(root, "data")
+    with open(os.path.join(metadata_root, "train.pkl"), "rb") as f:
         raw = f.read()
     assert raw[:2] == b"\x80\x02", "not a protocol-2 pickle"
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # e.g. a numpy DeprecationWarning on the array globals
-        meta = pickle.loads(raw)
+        with open(os.path.join(metadata_root, "train.pkl"), "rb") as f:
+            meta = pickle.load(f)
     assert isinstance(meta, list) and len(meta) == len(keys), f"{len(meta)} entries, expected {len(keys)}"
     want_keys = {"scene_name", "frag_id0", "frag_id1", "overlap", "pcd0", "pcd1", "rotation", "translation", "pcd0_known_share", "pcd0_view"}
-    exact = 0
+    ext = "." + loader
+
+    def load(rel):
+        assert rel.endswith(ext), rel
+        path = os.path.join(data_root, rel)
+        if loader == "npy":
+            return np.load(path)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            return torch.load(path, weights_only=False)
+
+    exact, compared, module = 0, 0, None
     for k, (e, key) in enumerate(zip(meta, keys)):
         r = rows[key]
         assert set(e) == want_keys, sorted(e)
@@ -175,12 +239,18 @@ def check_geotransformer(root, rows, keys):
         assert isinstance(R, np.ndarray) and R.dtype == np.float64 and R.shape == (3, 3) and R.flags["C_CONTIGUOUS"]
         assert isinstance(t, np.ndarray) and t.dtype == np.float64 and t.shape == (3,)
         assert np.array_equal(R, r["T"][:3, :3]) and np.array_equal(t, r["T"][:3, 3]), f"{key}: transform"
-        ref, src = (np.load(os.path.join(root, "data", e[p])) for p in ("pcd0", "pcd1"))
-        assert ref.dtype == np.float32 and ref.ndim == 2 and ref.shape[1] == 3
-        assert np.array_equal(ref, r["target"]) and np.array_equal(src, r["source"]), f"{key}: clouds"
-        known, view = (np.load(os.path.join(root, "data", e[p])) for p in ("pcd0_known_share", "pcd0_view"))
-        assert known.dtype == np.float32 and view.dtype == np.int8, (known.dtype, view.dtype)
+        ref, src = load(e["pcd0"]), load(e["pcd1"])
+        for cloud in (ref, src):
+            assert type(cloud) is np.ndarray and cloud.dtype == np.float32 and cloud.ndim == 2 and cloud.shape[1] == 3 and cloud.flags["C_CONTIGUOUS"]
+        assert ref.tobytes() == r["target"].tobytes() and ref.shape == r["target"].shape, f"{key}: target cloud (pcd0) bits"
+        assert src.tobytes() == r["source"].tobytes() and src.shape == r["source"].shape, f"{key}: source cloud (pcd1) bits"
+        known, view = load(e["pcd0_known_share"]), load(e["pcd0_view"])
+        assert known.dtype == np.float32 and view.dtype == np.int8 and known.shape == view.shape == (len(ref),), (known.dtype, view.dtype)
         assert np.array_equal(known, r["known_share"]) and np.array_equal(view, r["view"]), f"{key}: provenance"
+        if loader == "pth" and k < 2:
+            for rel, array in ((e["pcd0"], ref), (e["pcd0_view"], view)):
+                module = compare_with_torch_save(os.path.join(data_root, rel), array, torch, tmp)
+                compared += 1
         # GeoTransformer's convention ref = src @ R.T + t, computed as the library does: exact overlaps.
         T = np.eye(4)
         T[:3, :3], T[:3, 3] = R, t
@@ -192,7 +262,27 @@ def check_geotransformer(root, rows, keys):
         exact += ov_ref == r["overlap_target"] and ov_src == r["overlap_source"]
         close = np.sqrt(dist[dist < RADIUS * RADIUS])
         assert np.median(close) < VOXEL, f"{key}: median distance of overlapping points {np.median(close)}"
-    return {"entries": len(meta), "overlaps_bit_exact": exact}
+    report = {"entries": len(meta), "overlaps_bit_exact": exact, "clouds": loader}
+    if loader == "pth":
+        first = os.path.join(data_root, meta[0]["pcd0"])
+        # PyTorch >= 2.6 loads with weights_only=True by default, which refuses numpy arrays (as it
+        # refuses GeoTransformer's own files); the allow-list docs/using-datasets.md gives lets it load.
+        try:
+            torch.load(first)
+            refused = False
+        except pickle.UnpicklingError:
+            refused = True
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            from numpy.core.multiarray import _reconstruct  # no warning in numpy 1.x or 2.x (kept for pickles)
+
+            safe = [(_reconstruct, "numpy.core.multiarray._reconstruct"), np.ndarray, np.dtype, type(np.dtype("f4")), type(np.dtype("i1"))]
+            with torch.serialization.safe_globals(safe):
+                allowed = torch.load(first)
+                allowed_view = torch.load(os.path.join(data_root, meta[0]["pcd0_view"]))
+        assert np.array_equal(allowed, rows[keys[0]]["target"]) and np.array_equal(allowed_view, rows[keys[0]]["view"])
+        report.update(compared_with_torch_save=compared, pickle_module=module, weights_only_default_refuses=refused, torch=torch.__version__)
+    return report
 
 
 def check_ply(root, rows, keys):
@@ -218,9 +308,11 @@ def main():
     with open(sys.argv[2]) as f:
         plan = json.load(f)
     rows = load_rows(sys.argv[1])
+    tmp = tempfile.mkdtemp()
     print(json.dumps({
         "pointreggpt": check_pointreggpt(plan["pointreggpt"], rows, plan["exported"]),
-        "geotransformer": check_geotransformer(plan["geotransformer"], rows, plan["exported"]),
+        "geotransformer": check_geotransformer(plan["geotransformer"], rows, plan["exported"], "pth", tmp),
+        "geotransformer_npy": check_geotransformer(plan["geotransformer_npy"], rows, plan["exported"], "npy"),
         "ply": check_ply(plan["ply"], rows, plan["ply_exported"]),
         "numpy": np.__version__,
     }))

@@ -1,0 +1,408 @@
+"""The committed pairs of a pointreggpt dataset: manifest, schema versions, filters, shard-by-shard reads.
+
+Only the shard files named by ``<dataset>/manifest/pairs-<shard>.json`` entries (their ``file`` field,
+under ``shards/``) are part of a dataset; other files in ``shards/`` (a shard being written, a writer
+that lost a race on an object store) are never read.
+
+Schema versions (``schemas/pairs-v2.md``, ``schemas/pairs-v1.md`` in the pointreggpt repository):
+``pairs/2`` stores every integer signed, the 64-bit ``seed`` bit for bit as ``int64`` (negative at or
+above 2**63), and adds the per-point provenance lists ``target_known_share`` (float32) and
+``target_view`` (int8), aligned with ``target_points``. ``pairs/1`` stores unsigned integers and has no
+provenance. This module gives the same Python values for both: ``unit_index`` and the unsigned ``seed``
+as Python ints, and ``None`` provenance for version 1.
+"""
+
+import json
+import os
+import pickle
+import posixpath
+import re
+from collections import OrderedDict
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.compute as pc
+import pyarrow.dataset as pads
+import pyarrow.fs as pafs
+import pyarrow.parquet as pq
+
+from .store import filesystem_for
+
+TABLE = "pairs"
+SCHEMA_VERSION_KEY = b"schema_version"
+U64 = (1 << 64) - 1
+
+#: Small columns read to select rows; ``where=`` expressions may use any of them.
+INDEX_COLUMNS = [
+    "unit_index", "pair_key", "scene", "frame_key", "sample_index", "status", "seed",
+    "width", "height", "pose_draws", "overlap_source", "overlap_target",
+]
+#: Columns a pair (``Dataset.pairs``, ``PairDataset``) is made of; provenance only where the shard has it.
+PAIR_COLUMNS = [
+    "unit_index", "pair_key", "scene", "status", "seed", "t_target_from_source",
+    "source_points", "target_points", "overlap_source", "overlap_target",
+]
+PROVENANCE_COLUMNS = ["target_known_share", "target_view"]
+STATUSES = ("ok", "low_overlap", "too_few_points", "input_error")
+
+
+class DatasetError(RuntimeError):
+    """Not a readable pointreggpt dataset (no dataset.toml, a bad manifest entry, an unknown schema)."""
+
+
+def open_dataset(url, storage_options=None, filesystem=None):
+    """The dataset at ``url`` (a folder, ``s3://bucket/prefix``, ``az://container/prefix``, ``gs://...``).
+
+    ``storage_options``: explicit credentials and endpoint (``pointreggpt_data.store``); ``filesystem``: a
+    ready ``pyarrow.fs.FileSystem`` (``url`` is then the path in it).
+    """
+    return Dataset(url, storage_options=storage_options, filesystem=filesystem)
+
+
+def unsigned_seed(value):
+    """A stored seed (version 2: ``int64`` bit for bit; version 1: ``uint64``) as the unit's unsigned seed."""
+    return int(value) & U64
+
+
+def points_array(column, row):
+    """Row ``row`` of a ``list<fixed_size_list<float32, 3>>`` column as a float32 (N, 3) numpy array
+    (a copy of the stored bits, never converted through float64)."""
+    lst = column[row] if isinstance(column, (pa.ChunkedArray, pa.Array)) else column
+    values = lst.values
+    if values is None or len(values) == 0:
+        return np.zeros((0, 3), np.float32)
+    flat = values.flatten()
+    return np.array(flat.to_numpy(zero_copy_only=False), dtype=np.float32).reshape(-1, 3)
+
+
+def _flat_points(list_array):
+    """Every point of the rows of a points ``ListArray`` and each row's offsets into them:
+    (float32 (P, 3), int64 (n + 1,) starting at 0). Slicing of the array is respected."""
+    offsets = np.asarray(list_array.offsets, dtype=np.int64)
+    flat = np.asarray(list_array.flatten().flatten().to_numpy(zero_copy_only=False), dtype=np.float32)
+    return flat.reshape(-1, 3), offsets - offsets[0]
+
+
+def _flat_values(list_array, dtype):
+    """The values of the rows of a ``ListArray`` of scalars and each row's offsets into them."""
+    offsets = np.asarray(list_array.offsets, dtype=np.int64)
+    return np.asarray(list_array.flatten().to_numpy(zero_copy_only=False), dtype=dtype), offsets - offsets[0]
+
+
+def _range_expr(name, bounds):
+    """``lo <= name <= hi`` for ``bounds = (lo, hi)`` (either may be None); None for no bounds."""
+    if bounds is None:
+        return None
+    if isinstance(bounds, (int, float)):
+        raise TypeError(f"{name}: give a (low, high) range, e.g. ({bounds}, None) for at least {bounds}")
+    lo, hi = bounds
+    e = None
+    if lo is not None:
+        e = pc.field(name) >= float(lo)
+    if hi is not None:
+        h = pc.field(name) <= float(hi)
+        e = h if e is None else e & h
+    return e
+
+
+def selection_expression(status="ok", scene=None, overlap_source=None, overlap_target=None, where=None):
+    """The row filter of the selection arguments as one ``pyarrow.compute.Expression`` (None: every row).
+
+    ``status``: a status or a list of them (``None``: every status); ``scene``: a scene or a list;
+    ``overlap_source`` / ``overlap_target``: inclusive ``(low, high)`` ranges, either end ``None``;
+    ``where``: any further ``pyarrow.compute`` expression over ``INDEX_COLUMNS`` (e.g.
+    ``pc.field("sample_index") == 0``)."""
+    parts = []
+    for name, value in (("status", status), ("scene", scene)):
+        if value is None:
+            continue
+        if isinstance(value, str):
+            parts.append(pc.field(name) == value)
+        else:
+            parts.append(pc.field(name).isin(list(value)))
+    for name, bounds in (("overlap_source", overlap_source), ("overlap_target", overlap_target)):
+        e = _range_expr(name, bounds)
+        if e is not None:
+            parts.append(e)
+    if where is not None:
+        if not isinstance(where, pc.Expression):
+            raise TypeError("where= takes a pyarrow.compute.Expression, e.g. pc.field('sample_index') == 0")
+        parts.append(where)
+    if not parts:
+        return None
+    expr = parts[0]
+    for p in parts[1:]:
+        expr = expr & p
+    return expr
+
+
+class Shard:
+    """One committed shard: its manifest entry, its file's path in the store, and its schema version."""
+
+    def __init__(self, entry, path, schema_version):
+        self.entry = entry
+        self.index = entry["shard"]
+        self.path = path
+        self.rows = entry["rows"]
+        self.schema_version = schema_version
+        self._fragment = None
+
+    def __getstate__(self):
+        state = dict(self.__dict__)
+        state["_fragment"] = None  # re-made (and its footer re-read) in the process that unpickles it
+        return state
+
+    def __repr__(self):
+        return f"Shard({self.index}, {self.path!r}, rows={self.rows}, {self.schema_version})"
+
+
+class Dataset:
+    """A pointreggpt dataset opened for reading (see ``open_dataset``).
+
+    Attributes: ``url``, ``filesystem`` and ``base`` (the dataset's path in it), ``schema_version``
+    (``"pairs/2"`` or ``"pairs/1"``, from ``dataset.toml``), ``has_provenance``, ``config_hash``,
+    ``shards`` (the committed shards in shard order), ``num_rows`` (rows of the committed shards).
+    """
+
+    def __init__(self, url, storage_options=None, filesystem=None):
+        self.url = str(url)
+        self.storage_options = dict(storage_options or {})
+        self.filesystem, self.base = filesystem_for(url, storage_options, filesystem)
+        header = self._read_header()
+        self.schema_version = header.get("schema_version", "")
+        self.config_hash = header.get("config_hash", "")
+        self.code_version = header.get("code_version", "")
+        if self.schema_version not in ("pairs/1", "pairs/2"):
+            raise DatasetError(
+                f"{self.url}: the dataset's schema is {self.schema_version!r}; this reader knows pairs/1 and pairs/2"
+            )
+        self.has_provenance = self.schema_version != "pairs/1"
+        self.shards = self._read_manifest()
+        self.num_rows = sum(s.rows for s in self.shards)
+        self._pid = os.getpid()
+
+    # -- layout -----------------------------------------------------------------------------------------
+
+    def _path(self, *parts):
+        return posixpath.join(self.base, *parts) if self.base != "/" else "/" + posixpath.join(*parts)
+
+    def _read_text(self, path):
+        with self.filesystem.open_input_stream(path) as f:
+            return f.read().decode("utf-8")
+
+    def _read_header(self):
+        path = self._path("dataset.toml")
+        info = self.filesystem.get_file_info(path)
+        if info.type != pafs.FileType.File:
+            raise DatasetError(f"{self.url}: not a pointreggpt dataset: it has no dataset.toml")
+        header = {}
+        # The header is dotted `dataset.<key> = "<value>"` lines before every table.
+        for line in self._read_text(path).splitlines():
+            m = re.match(r'^\s*dataset\.(\w+)\s*=\s*"((?:[^"\\]|\\.)*)"\s*$', line)
+            if m:
+                header[m.group(1)] = json.loads('"' + m.group(2) + '"')
+            elif line.startswith("["):
+                break
+        if "schema_version" not in header:
+            raise DatasetError(f"{self.url}: dataset.toml has no dataset.schema_version header")
+        return header
+
+    def _read_manifest(self):
+        selector = pafs.FileSelector(self._path("manifest"), allow_not_found=True)
+        shards = []
+        for info in self.filesystem.get_file_info(selector):
+            name = info.base_name
+            if info.type != pafs.FileType.File or not (name.startswith(TABLE + "-") and name.endswith(".json")):
+                continue
+            try:
+                entry = json.loads(self._read_text(info.path))
+                file = entry["file"]
+                entry["shard"], entry["rows"] = int(entry["shard"]), int(entry["rows"])
+            except (ValueError, KeyError, TypeError) as e:
+                raise DatasetError(f"{self.url}: bad manifest entry {name}: {e}") from None
+            if entry.get("table", TABLE) != TABLE or "/" in file or not file.startswith(TABLE + "-"):
+                raise DatasetError(f"{self.url}: manifest entry {name} names {file!r}, not a {TABLE} shard")
+            version = entry.get("schema_version") or self.schema_version
+            shards.append(Shard(entry, self._path("shards", file), version))
+        shards.sort(key=lambda s: s.index)
+        return shards
+
+    @property
+    def files(self):
+        """The committed shard files (paths in ``filesystem``), in shard order."""
+        return [s.path for s in self.shards]
+
+    def __repr__(self):
+        return f"Dataset({self.url!r}, {self.schema_version}, {len(self.shards)} shards, {self.num_rows} rows)"
+
+    # -- reading ----------------------------------------------------------------------------------------
+
+    def _check_process(self):
+        """In a process forked after this dataset was opened (a DataLoader worker with the default "fork"
+        start on Linux), a fresh filesystem client and fragments: a store client's pooled connections must
+        not be shared with the parent. Azure's SDK keeps its connection pool process-wide, so a forked
+        process cannot get a clean one: refused with the remedy (spawned workers unpickle the dataset,
+        which makes a new client; see ``__setstate__``)."""
+        if self._pid == os.getpid():
+            return
+        azure = getattr(pafs, "AzureFileSystem", None)
+        if azure is not None and isinstance(self.filesystem, azure):
+            raise DatasetError(
+                f"{self.url}: an az:// dataset cannot be read in a forked process (the Azure SDK's connection pool "
+                "is shared with the parent and mixes up responses): give the DataLoader multiprocessing_context='spawn' "
+                "(or 'forkserver'), or num_workers=0"
+            )
+        self.filesystem = pickle.loads(pickle.dumps(self.filesystem))  # pyarrow filesystems rebuild from their options
+        for s in self.shards:
+            s._fragment = None
+        self._pid = os.getpid()
+
+    def __setstate__(self, state):
+        self.__dict__.update(state)
+        self._pid = os.getpid()  # unpickled: the filesystem client was just made in this process
+
+    def fragment(self, shard):
+        """The shard's ``pyarrow.dataset`` fragment; its footer is read once and kept, so each later read
+        of the shard fetches only the column chunks it needs."""
+        self._check_process()
+        if shard._fragment is None:
+            fragment = pads.ParquetFileFormat().make_fragment(shard.path, filesystem=self.filesystem)
+            fragment.ensure_complete_metadata()
+            shard._fragment = fragment
+        return shard._fragment
+
+    def shard_schema(self, shard):
+        """The Arrow schema of a shard's file (from its footer, read once)."""
+        return self.fragment(shard).physical_schema
+
+    def shard_has_provenance(self, shard):
+        return all(c in self.shard_schema(shard).names for c in PROVENANCE_COLUMNS)
+
+    def read_shard(self, shard, columns, filter=None):
+        """The columns ``columns`` of one committed shard (only those, and the columns ``filter`` uses, are
+        read), rows in file order, keeping those where ``filter`` (a ``pyarrow.compute`` expression) holds.
+        Missing provenance columns of a version-1 shard are left out."""
+        names = self.shard_schema(shard).names
+        cols = [c for c in columns if c in names]
+        unknown = [c for c in columns if c not in names and c not in PROVENANCE_COLUMNS]
+        if unknown:
+            raise KeyError(f"{shard.path}: no column(s) {unknown} (columns: {', '.join(names)})")
+        return self.fragment(shard).to_table(columns=cols, filter=filter)
+
+    def tables(self, columns=None, status="ok", scene=None, overlap_source=None, overlap_target=None, where=None):
+        """Yields ``(shard, pyarrow.Table)`` shard by shard: the selected rows (``selection_expression``) of
+        each committed shard with only ``columns`` (default ``INDEX_COLUMNS``) read."""
+        expr = selection_expression(status, scene, overlap_source, overlap_target, where)
+        for shard in self.shards:
+            yield shard, self.read_shard(shard, columns or INDEX_COLUMNS, expr)
+
+    def to_table(self, columns=None, status="ok", scene=None, overlap_source=None, overlap_target=None, where=None):
+        """The selected rows of every committed shard as one ``pyarrow.Table`` (``columns`` only), in shard
+        order. Version-1 and version-2 shards are not mixed in one dataset."""
+        parts = [t for _, t in self.tables(columns, status, scene, overlap_source, overlap_target, where)]
+        if not parts:
+            return pa.table({c: [] for c in (columns or INDEX_COLUMNS)})
+        return pa.concat_tables(parts)
+
+    def pair_keys(self, status="ok", scene=None, overlap_source=None, overlap_target=None, where=None):
+        """The pair keys of the selected rows in unit order."""
+        t = self.to_table(["unit_index", "pair_key"], status, scene, overlap_source, overlap_target, where)
+        order = np.argsort(np.asarray(t.column("unit_index").to_numpy(), dtype=np.uint64), kind="stable")
+        keys = t.column("pair_key").to_pylist()
+        return [keys[i] for i in order]
+
+    def pairs(self, status="ok", scene=None, overlap_source=None, overlap_target=None, where=None, columns=()):
+        """Yields each selected pair as a dict (``PAIR_FIELDS``), shard by shard in unit order, reading
+        the pair columns (plus ``columns``, returned as Python values) of one shard at a time."""
+        expr = selection_expression(status, scene, overlap_source, overlap_target, where)
+        wanted = PAIR_COLUMNS + PROVENANCE_COLUMNS + [c for c in columns if c not in PAIR_COLUMNS + PROVENANCE_COLUMNS]
+        for shard in self.shards:
+            decoded = DecodedShard(self.read_shard(shard, wanted, expr), extra=columns)
+            for i in decoded.order:
+                yield decoded.pair(i)
+
+
+#: The fields of a pair dict (``Dataset.pairs``, ``PairDataset``):
+#:
+#: ``pair_key`` str, ``scene`` str, ``status`` str, ``unit_index`` int, ``seed`` int (the unit's unsigned
+#: 64-bit seed), ``source_points`` float32 (N, 3) in the source camera frame, ``target_points`` float32
+#: (M, 3) in the target camera frame, ``T_target_from_source`` float64 (4, 4) (``p_t = R p_s + t``),
+#: ``overlap_source`` / ``overlap_target`` float, ``target_known_share`` float32 (M,) and ``target_view``
+#: int8 (M,) (``None`` in a version-1 dataset).
+PAIR_FIELDS = (
+    "pair_key", "scene", "status", "unit_index", "seed", "source_points", "target_points",
+    "T_target_from_source", "overlap_source", "overlap_target", "target_known_share", "target_view",
+)
+
+
+class DecodedShard:
+    """A shard's pair columns decoded once into flat numpy buffers; ``pair(i)`` slices row ``i``."""
+
+    def __init__(self, table, extra=()):
+        self.n = table.num_rows
+        col = lambda name: table.column(name).combine_chunks() if table.num_rows else table.column(name)
+        self.pair_key = table.column("pair_key").to_pylist()
+        self.scene = table.column("scene").to_pylist()
+        self.status = table.column("status").to_pylist()
+        self.unit_index = [int(u) for u in table.column("unit_index").to_pylist()]
+        self.seed = [unsigned_seed(s) for s in table.column("seed").to_pylist()]
+        self.overlap_source = table.column("overlap_source").to_numpy().astype(np.float64)
+        self.overlap_target = table.column("overlap_target").to_numpy().astype(np.float64)
+        if self.n:
+            t = col("t_target_from_source")
+            self.transform = np.asarray(t.flatten().to_numpy(zero_copy_only=False), dtype=np.float64).reshape(self.n, 4, 4)
+            self.source, self.source_off = _flat_points(col("source_points"))
+            self.target, self.target_off = _flat_points(col("target_points"))
+        self.provenance = all(c in table.column_names for c in PROVENANCE_COLUMNS)
+        if self.provenance and self.n:
+            self.known, self.known_off = _flat_values(col("target_known_share"), np.float32)
+            self.view, self.view_off = _flat_values(col("target_view"), np.int8)
+            if not (np.array_equal(self.known_off, self.target_off) and np.array_equal(self.view_off, self.target_off)):
+                bad = [self.pair_key[i] for i in range(self.n) if not (
+                    self.known_off[i + 1] - self.known_off[i] == self.view_off[i + 1] - self.view_off[i] == self.target_off[i + 1] - self.target_off[i])]
+                raise DatasetError(f"provenance lists not aligned with target_points in pair(s) {bad[:5]}")
+        self.extra = {c: table.column(c).to_pylist() for c in extra}
+        self.order = sorted(range(self.n), key=lambda i: self.unit_index[i])
+        self.row_of = {u: i for i, u in enumerate(self.unit_index)}
+
+    def pair(self, i):
+        s0, s1 = self.source_off[i], self.source_off[i + 1]
+        t0, t1 = self.target_off[i], self.target_off[i + 1]
+        out = {
+            "pair_key": self.pair_key[i],
+            "scene": self.scene[i],
+            "status": self.status[i],
+            "unit_index": self.unit_index[i],
+            "seed": self.seed[i],
+            "source_points": self.source[s0:s1].copy(),
+            "target_points": self.target[t0:t1].copy(),
+            "T_target_from_source": self.transform[i].copy(),
+            "overlap_source": float(self.overlap_source[i]),
+            "overlap_target": float(self.overlap_target[i]),
+            "target_known_share": None,
+            "target_view": None,
+        }
+        if self.provenance:
+            out["target_known_share"] = self.known[self.known_off[i]:self.known_off[i + 1]].copy()
+            out["target_view"] = self.view[self.view_off[i]:self.view_off[i + 1]].copy()
+        for c, values in self.extra.items():
+            out[c] = values[i]
+        return out
+
+
+class ShardCache:
+    """The last ``size`` decoded shards of a dataset (least recently used first out)."""
+
+    def __init__(self, size=1):
+        self.size = max(1, int(size))
+        self._items = OrderedDict()
+
+    def get(self, key, load):
+        if key in self._items:
+            self._items.move_to_end(key)
+            return self._items[key]
+        value = load()
+        self._items[key] = value
+        while len(self._items) > self.size:
+            self._items.popitem(last=False)
+        return value
