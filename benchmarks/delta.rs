@@ -6,20 +6,17 @@
 //! worker). Shards are one tiny row each, so the times are the protocol's (listings, reads, create-only
 //! writes), not Parquet's. Run: `cargo bench --bench delta`.
 
-#[path = "../tests/support/store.rs"]
+#[path = "../tests/support/mod.rs"]
 #[allow(dead_code)]
-mod store;
+mod support;
+
+use support::store;
 
 use pointreggpt::shards::dataset::Dataset;
 use pointreggpt::shards::delta::{publish, LOG_DIR};
 use pointreggpt::shards::PairRow;
 use std::sync::Barrier;
 use std::time::Instant;
-
-/// The Python interpreter moto runs with (`PYTHON`, default `python3`).
-fn python() -> String {
-    std::env::var("PYTHON").unwrap_or_else(|_| "python3".into())
-}
 
 fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);

@@ -3,9 +3,11 @@
 //! on a local S3 server (moto, as in tests/store.rs) against a local folder: throughput of whole shards
 //! and the latency of committing small shards. Run: `cargo bench --bench shards`.
 
-#[path = "../tests/support/store.rs"]
+#[path = "../tests/support/mod.rs"]
 #[allow(dead_code)]
-mod store;
+mod support;
+
+use support::store;
 
 use pointreggpt::geometry::Point;
 use pointreggpt::rng::Rng;
@@ -56,11 +58,6 @@ fn row(i: u64, rng: &mut Rng) -> PairRow {
     }
 }
 
-/// The Python interpreter of the peers (`PYTHON`, default `python3`); `store` starts moto with it.
-fn python() -> String {
-    std::env::var("PYTHON").unwrap_or_else(|_| "python3".into())
-}
-
 fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
     v[v.len() / 2]
@@ -107,7 +104,7 @@ for _ in range(reps):
     s = time.perf_counter(); pq.write_table(t, path + ".pyarrow", compression="zstd", compression_level=3); w.append((time.perf_counter() - s) * 1e3)
 print(statistics.median(w), statistics.median(r))
 "#;
-    let py = std::process::Command::new(std::env::var("PYTHON").unwrap_or_else(|_| "python3".into()))
+    let py = support::python_command()
         .args(["-c", script])
         .arg(&path)
         .arg(reps.to_string())
