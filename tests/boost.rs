@@ -356,10 +356,12 @@ fn is_real(key: &str) -> bool {
 fn every_alias_and_the_fpfh_mlp_run_with_their_counts_and_other_settings_are_refused() {
     let dir = tempfile::tempdir().unwrap();
     let (seq_root, other, bench) = (dir.path().join("seq"), dir.path().join("other"), dir.path().join("bench"));
-    run_ok(&["synth", "--out", seq_root.to_str().unwrap(), "--frames", "40", "--seed", "501"]);
+    // The tiny run's training scene: its real single-frame pairs cover the classical generator's overlap
+    // histogram, so C5 and C6 get real pairs (a scene whose pairs miss a bin gets none: "no training pairs").
+    run_ok(&["synth", "--out", seq_root.to_str().unwrap(), "--frames", "50", "--seed", "500"]);
     run_ok(&["synth", "--out", other.to_str().unwrap(), "--frames", "40", "--seed", "200"]);
     run_ok(&["fragments", other.join("synthetic-200").to_str().unwrap(), "--single-frames", "--every", "10", "--out", bench.to_str().unwrap(), "--quiet"]);
-    let seq = seq_root.join("synthetic-501");
+    let seq = seq_root.join("synthetic-500");
     let out = dir.path().join("all");
     let extra = ["--conditions", "C2,C4,C5,C5x2,C6,C6x2", "--seeds", "1", "--pairs", "12", "--steps", "2", "--samples", "100", "--model", "fpfh-mlp"];
     let stdout = boost_with(&bench, &seq, &out, &extra);
@@ -395,7 +397,8 @@ fn every_alias_and_the_fpfh_mlp_run_with_their_counts_and_other_settings_are_ref
     // Any other training setting with the same --out is refused, naming it; nothing is retrained.
     let classical = dir.path().join("classical.toml");
     let text = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("pipelines/paper-3dmatch-classical.toml")).unwrap();
-    std::fs::write(&classical, text + "\n[voxelize]\nvoxel = 0.03\n").unwrap();
+    assert_eq!(text.matches("\nvoxel = 0.025\n").count(), 1, "the classical config's voxel size");
+    std::fs::write(&classical, text.replace("\nvoxel = 0.025\n", "\nvoxel = 0.03\n")).unwrap();
     for (flag, value, named) in [
         ("--pairs", "13", "pairs: recorded 12, now 13"),
         ("--frames", "29", "frames: recorded 30, now 29"),
