@@ -17,7 +17,7 @@ use std::sync::MutexGuard;
 use std::time::{Duration, Instant};
 use support::azure::Azurite;
 use support::store::ENV;
-use support::{bin, python, synthetic_config};
+use support::{bin, digests, python, synthetic_config};
 
 /// One test's Azure world: an Azurite with one container, a temporary folder, and the lock of the
 /// process environment (the tests point object_store's emulator variables at their own server).
@@ -55,10 +55,6 @@ impl World {
 
 /// Content digests of the committed pairs of `dataset` (folder or URL; for a URL, the process
 /// environment must point at its server).
-fn digests(dataset: &str) -> BTreeMap<u64, String> {
-    let ds = Dataset::open(dataset).unwrap();
-    ds.read_pairs().unwrap().iter().map(|r| (r.unit_index, r.content_digest().to_hex().to_string())).collect()
-}
 
 /// `pointreggpt --threads 2 <args>` pointed at the Azurite behind `endpoint` only.
 fn run(endpoint: &str, args: &[&str]) -> Command {

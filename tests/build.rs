@@ -16,13 +16,9 @@ use std::collections::BTreeMap;
 use std::path::Path;
 use std::process::Stdio;
 use std::time::Duration;
-use support::{bin, synthetic_config};
+use support::{bin, digests, synthetic_config};
 
 /// unit index → content digest of every committed row.
-fn digests(dataset: &Path) -> BTreeMap<u64, String> {
-    let rows = Dataset::open(dataset).unwrap().read_pairs().unwrap();
-    rows.iter().map(|r| (r.unit_index, r.content_digest().to_hex().to_string())).collect()
-}
 
 fn build_in_process(config_text: &str, out: &Path, threads: usize) -> BTreeMap<u64, String> {
     let config = BuildConfig::from_toml(config_text, "test").unwrap();

@@ -8,13 +8,11 @@
 
 mod support;
 
-use pointreggpt::shards::dataset::Dataset;
-use std::collections::BTreeMap;
 use std::net::TcpListener;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
-use support::bin;
+use support::{bin, digests};
 
 const TASKS: u64 = 4;
 
@@ -268,11 +266,6 @@ fn demo() -> String {
 fn ok(o: Output) -> String {
     assert!(o.status.success(), "{}\n{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
     String::from_utf8_lossy(&o.stdout).into_owned()
-}
-
-fn digests(dataset: &Path) -> BTreeMap<u64, String> {
-    let ds = Dataset::open(dataset).unwrap();
-    ds.read_pairs().unwrap().iter().map(|r| (r.unit_index, r.content_digest().to_hex().to_string())).collect()
 }
 
 /// Committed shards of worker `task` (k mod TASKS = task) in the folder `dataset`.

@@ -14,7 +14,7 @@ use std::time::{Duration, Instant};
 use std::path::PathBuf;
 use std::sync::MutexGuard;
 use support::store::{Moto, Proxy, ENV};
-use support::{bin, synthetic_config, synthetic_labels_config};
+use support::{bin, digests, synthetic_config, synthetic_labels_config};
 
 /// One test's S3 world: a moto server with one bucket and a temporary folder, under the lock of the
 /// process environment (the tests point the AWS variables at their own server).
@@ -47,10 +47,6 @@ impl World {
 
 /// Content digests of the committed pairs of `dataset` (folder or URL; for a URL, the environment
 /// must point at its server).
-fn digests(dataset: &str) -> BTreeMap<u64, String> {
-    let ds = Dataset::open(dataset).unwrap();
-    ds.read_pairs().unwrap().iter().map(|r| (r.unit_index, r.content_digest().to_hex().to_string())).collect()
-}
 
 /// `pointreggpt <args>` with the store environment of `endpoint`.
 fn run(endpoint: &str, args: &[&str]) -> Command {

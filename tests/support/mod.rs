@@ -153,3 +153,9 @@ pub fn synthetic_labels_config(frames: usize, width: u32, height: u32) -> String
         cy = height as f64 / 2.0
     )
 }
+
+/// Each committed pair of `dataset` (a folder or a store URL) by unit index: its content digest.
+pub fn digests(dataset: impl AsRef<std::path::Path>) -> std::collections::BTreeMap<u64, String> {
+    let ds = pointreggpt::shards::dataset::Dataset::open(dataset).unwrap();
+    ds.read_pairs().unwrap().iter().map(|r| (r.unit_index, r.content_digest().to_hex().to_string())).collect()
+}
