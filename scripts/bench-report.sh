@@ -17,7 +17,7 @@ TMP="$(mktemp)"
        "$(awk '/MemTotal/ {printf "%.0f GiB", $2/1048576}' /proc/meminfo) RAM, $(uname -sr)."
   echo "Every peer runs in the same invocation as ours, on the same inputs; ratios are peer time / our time"
   echo "(above 1 = we are faster). Timings are medians; the machine may be shared, so expect some noise."
-  for bench in geometry tsdf registration shards delta networks refiner pipeline; do
+  for bench in geometry tsdf registration shards query delta networks refiner pipeline; do
     echo
     echo "## $bench (\`cargo bench --bench $bench\`)"
     echo
