@@ -274,23 +274,25 @@ fn two_worker_processes_on_one_folder_equal_one_process() {
     assert_eq!(digests(&out2), reference);
 }
 
-/// A 3DMatch folder written from a synthetic sequence, with one truncated PNG and one missing pose.
+/// A 3DMatch folder written from a synthetic sequence, with one truncated PNG, one unreadable pose file
+/// and one frame without a pose file.
 fn folder_with_bad_frames(root: &Path) -> (std::path::PathBuf, std::path::PathBuf) {
     let seq = SyntheticSequence::generate(&SyntheticConfig { frames: 8, ..Default::default() }, 3).unwrap();
     seq.write_3dmatch(root).unwrap();
     let bad_png = root.join("frame-000002.depth.png");
     let bytes = std::fs::read(&bad_png).unwrap();
     std::fs::write(&bad_png, &bytes[..bytes.len() / 3]).unwrap();
-    let missing_pose = root.join("frame-000005.pose.txt");
-    std::fs::remove_file(&missing_pose).unwrap();
-    (bad_png, missing_pose)
+    let bad_pose = root.join("frame-000005.pose.txt");
+    std::fs::write(&bad_pose, "1 0 0 0\n0 1 0 0\n0 0 1 x\n0 0 0 1\n").unwrap();
+    std::fs::remove_file(root.join("frame-000006.pose.txt")).unwrap();
+    (bad_png, bad_pose)
 }
 
 #[test]
-fn bad_frames_become_input_error_rows_and_strict_stops_naming_the_file() {
+fn bad_frames_become_input_error_rows_unposed_frames_build_and_strict_stops_naming_the_file() {
     let dir = tempfile::tempdir().unwrap();
     let data = dir.path().join("seq");
-    let (bad_png, missing_pose) = folder_with_bad_frames(&data);
+    let (bad_png, bad_pose) = folder_with_bad_frames(&data);
     let config = dir.path().join("c.toml");
     std::fs::write(&config, format!("shard_size = 3\n[source]\nkind = \"directory\"\npath = \"{}\"\n", data.display())).unwrap();
 
@@ -303,15 +305,17 @@ fn bad_frames_become_input_error_rows_and_strict_stops_naming_the_file() {
     assert_eq!(errors.len(), 2, "{:?}", rows.iter().map(|r| (&r.frame_key, r.status, &r.message)).collect::<Vec<_>>());
     assert!(errors[0].frame_key.ends_with("frame-000002") && errors[0].message.contains("frame-000002.depth.png"));
     assert!(errors[0].message.contains("truncated") || errors[0].message.contains("corrupt"), "{}", errors[0].message);
-    assert!(errors[1].frame_key.ends_with("frame-000005") && errors[1].message.contains("pose"), "{}", errors[1].message);
+    assert!(errors[1].frame_key.ends_with("frame-000005") && errors[1].message.contains("frame-000005.pose.txt"), "{}", errors[1].message);
     assert!(rows.iter().filter(|r| r.status != Status::InputError).all(|r| !r.source_points.is_empty()));
+    // A pair needs only the depth map and the intrinsics: the frame without a pose file makes one.
+    let unposed = rows.iter().find(|r| r.frame_key.ends_with("frame-000006")).unwrap();
+    assert_eq!(unposed.status, Status::Ok, "{}", unposed.message);
 
     let o = spawn_build(&config, &dir.path().join("strict"), &["--strict"]).wait_with_output().unwrap();
     assert!(!o.status.success());
     let err = String::from_utf8_lossy(&o.stderr);
     // Whichever bad frame a worker meets first stops the build, named in the message.
-    let missing_pose_png = missing_pose.with_file_name("frame-000005.depth.png");
-    assert!(err.contains(&bad_png.display().to_string()) || err.contains(&missing_pose_png.display().to_string()), "{err}");
+    assert!(err.contains(&bad_png.display().to_string()) || err.contains(&bad_pose.display().to_string()), "{err}");
     // The shard holding the bad frame is not committed.
     let strict = Dataset::open(dir.path().join("strict")).unwrap();
     assert!(!strict.committed("pairs").unwrap().contains_key(&0) || !strict.committed("pairs").unwrap().contains_key(&1));

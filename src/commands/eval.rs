@@ -45,8 +45,14 @@ edge (edge); flying = share of filled pixels more than 5 cm from both the neares
 correction of the build is not applied. --dump-views writes the views for benchmarks/peers/fill_peers.py."
 )]
 pub struct EvalInpaintArgs {
-    /// Folder of depth sequences with poses (3DMatch / 7-Scenes / TUM / ScanNet layout).
+    /// Folder of depth sequences with poses (3DMatch / 7-Scenes / TUM / ScanNet layout, or a plain folder
+    /// with --layout folder). Pairs with a frame without a camera pose are left out (counted).
     pub sequences: PathBuf,
+    #[command(flatten)]
+    pub open: super::sequence_args::SequenceArgs,
+    /// Stop at a frame without a camera pose instead of leaving its pair out.
+    #[arg(long)]
+    pub strict: bool,
     /// Frames between the source view and the target view.
     #[arg(long, default_value_t = 10)]
     pub gap: usize,
@@ -212,11 +218,16 @@ fn run_inpaint(a: &EvalInpaintArgs, out: &mut dyn Write) -> Result<()> {
         .collect::<Result<Vec<_>>>()?;
     let working = pipelines.first().map(|(_, c)| c.working.clone()).unwrap_or_default();
     let mut views = Vec::new();
-    for seq in crate::sources::open_sequences(&a.sequences, crate::sources::Layout::Auto)? {
+    let mut unposed = 0;
+    for seq in crate::sources::open_sequences(&a.sequences, a.open.options()?)? {
         let mut taken = 0;
         for j in (a.first..seq.frames.len().saturating_sub(a.gap)).step_by(a.every) {
             if a.max_views > 0 && taken == a.max_views {
                 break;
+            }
+            if seq.unposed([j, j + a.gap], a.strict)? > 0 {
+                unposed += 1;
+                continue;
             }
             let (s, t) = (seq.frames[j].load()?, seq.frames[j + a.gap].load()?);
             let seed = crate::rng::unit_seed(a.seed, &s.key, a.gap as u64);
@@ -224,8 +235,11 @@ fn run_inpaint(a: &EvalInpaintArgs, out: &mut dyn Write) -> Result<()> {
             taken += 1;
         }
     }
+    if unposed > 0 {
+        writeln!(out, "{unposed} frame pair(s) left out: a frame without a camera pose").map_err(|e| Error::io("<stdout>", e))?;
+    }
     if views.is_empty() {
-        return Err(Error::config("sequences", format!("no frame pair {} frames apart after --first {}", a.gap, a.first)));
+        return Err(Error::config("sequences", format!("no posed frame pair {} frames apart after --first {}", a.gap, a.first)));
     }
     if !pipelines.is_empty() {
         return run_pipelines(a, &pipelines, &views, &working, out);

@@ -6,6 +6,7 @@ use crate::error::{Error, Result};
 use crate::registration::EvalConfig;
 use crate::training::boost::conditions::{parse_comparisons, parse_list, Condition, Source};
 use crate::training::boost::data::SourceFrames;
+use crate::training::boost::config::TrainingSequence;
 use crate::training::boost::{run_boost, BoostConfig};
 use super::train_descriptor::{DescriptorModelArgs, DescriptorTrainingArgs};
 use crate::training::descriptor::train::DescriptorTrainOptions;
@@ -46,16 +47,22 @@ pub struct EvalBoostArgs {
     /// 3DMatch and 3DLoMatch overlaps, --single-frames pairs); several are scored in one run.
     #[arg(required = true)]
     pub bench: Vec<PathBuf>,
-    /// The posed training sequence (one sequence folder, any layout `fragments` reads).
-    #[arg(long)]
-    pub sequence: PathBuf,
-    /// First training frame.
+    /// A training sequence folder (any layout `fragments` reads), optionally with its frames as
+    /// `FOLDER@FIRST-LAST` (indices, inclusive: `@0-149`); without them --first and --frames apply. Repeat
+    /// to train on several sequences at once: real and generated pairs come from each.
+    #[arg(long, required = true)]
+    pub sequence: Vec<String>,
+    /// First training frame of a --sequence given without its frames.
     #[arg(long, default_value_t = 0)]
     pub first: usize,
     /// Training frames from --first on (both frames of every real pair, every fragment, and every generated
     /// pair's source lie in them).
     #[arg(long, default_value_t = 200)]
     pub frames: usize,
+    /// Stop at a training frame without a camera pose (default: leave such frames out of the real pairs
+    /// and count them; generated pairs need no pose).
+    #[arg(long)]
+    pub strict: bool,
     /// Conditions, comma-separated (see below; default the nine of the single-frame protocol).
     #[arg(long, value_delimiter = ',')]
     pub conditions: Vec<String>,
@@ -157,10 +164,10 @@ pub fn run(a: &EvalBoostArgs, out: &mut dyn Write) -> Result<()> {
     train.model = a.model.model()?;
     train.checkpoint_every = if a.training.epochs.is_some() { 100 } else { (a.steps / 4).clamp(1, 100) };
     train.validate()?;
+    let sequences = a.sequence.iter().map(|s| parse_sequence(s, a.first, a.frames)).collect::<Result<Vec<_>>>()?;
     let cfg = BoostConfig {
-        sequence: a.sequence.clone(),
-        first: a.first,
-        frames: a.frames,
+        sequences,
+        strict: a.strict,
         real_every: a.real_every,
         real_gaps: a.real_gaps.clone(),
         fragment_frames: a.fragment_frames,
@@ -204,4 +211,31 @@ pub fn run(a: &EvalBoostArgs, out: &mut dyn Write) -> Result<()> {
     ).map_err(w)?;
     write!(out, "{}", report.text).map_err(w)?;
     Ok(())
+}
+
+/// `FOLDER` (frames `first .. first + frames`) or `FOLDER@FIRST-LAST` (inclusive indices).
+fn parse_sequence(s: &str, first: usize, frames: usize) -> Result<TrainingSequence> {
+    let range = s.rsplit_once('@').and_then(|(path, r)| {
+        let (a, b) = r.split_once('-')?;
+        Some((path, a.trim().parse::<usize>().ok()?, b.trim().parse::<usize>().ok()?))
+    });
+    match range {
+        Some((_, a, b)) if b < a => Err(Error::config("--sequence", format!("`{s}`: the last frame {b} is before the first {a}"))),
+        Some((path, a, b)) => Ok(TrainingSequence { path: PathBuf::from(path), first: a, frames: b - a + 1 }),
+        None => Ok(TrainingSequence { path: PathBuf::from(s), first, frames }),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sequences_take_their_own_frames_or_the_flags() {
+        let t = parse_sequence("data/icl@0-299", 5, 10).unwrap();
+        assert_eq!((t.path, t.first, t.frames), (PathBuf::from("data/icl"), 0, 300));
+        let t = parse_sequence("data/a@b/kitchen", 5, 10).unwrap();
+        assert_eq!((t.path, t.first, t.frames), (PathBuf::from("data/a@b/kitchen"), 5, 10));
+        assert!(parse_sequence("x@9-3", 0, 1).unwrap_err().to_string().contains("before the first"));
+    }
 }

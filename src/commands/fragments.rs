@@ -7,7 +7,8 @@ use crate::registration::benchmark::make::{
     fragments_within, fuse_fragment, pair_truths, single_frame_cloud, write_benchmark, Cloud, LO_MATCH_MAX, SINGLE_FRAME_MAX_OVERLAP,
 };
 use crate::runtime::progress::bar;
-use crate::sources::{open_sequences, Layout};
+use crate::sources::open_sequences;
+use super::sequence_args::SequenceArgs;
 use crate::stages::ingest::WorkingConfig;
 use crate::stages::voxelize::VoxelizeConfig;
 use crate::tsdf::TsdfConfig;
@@ -28,12 +29,11 @@ fragment j into fragment i), gt.info (the 6x6 information matrix of j's overlapp
 with overlap from 10 to 90 % go to the benchmarks single-frame (above 30 %) and single-frame-lo (10-30 %)."
 )]
 pub struct FragmentsArgs {
-    /// Sequence folder (3DMatch / 7-Scenes / SUN3D, TUM or ScanNet layout; frames need poses). Every
-    /// sequence found becomes a scene.
+    /// Sequence folder (3DMatch / 7-Scenes / SUN3D, TUM, ScanNet, or a plain folder with --layout folder).
+    /// Every sequence found becomes a scene; frames without a camera pose are left out (counted).
     pub sequence: PathBuf,
-    /// Folder layout.
-    #[arg(long, value_enum, default_value = "auto")]
-    pub layout: Layout,
+    #[command(flatten)]
+    pub open: SequenceArgs,
     /// Frames fused into one fragment (3DMatch: 50).
     #[arg(long, default_value_t = 50)]
     pub frames_per_fragment: usize,
@@ -59,6 +59,9 @@ pub struct FragmentsArgs {
     /// Output benchmark folder.
     #[arg(long)]
     pub out: PathBuf,
+    /// Stop at the first frame without a camera pose (default: leave such frames out and count them).
+    #[arg(long)]
+    pub strict: bool,
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
@@ -76,7 +79,7 @@ pub fn run(args: &FragmentsArgs, out: &mut dyn Write) -> Result<()> {
             format!("{} is not a multiple of the fragment stride {stride}: fragment numbers would not be the official ones", args.first),
         ));
     }
-    for seq in open_sequences(&args.sequence, args.layout)? {
+    for seq in open_sequences(&args.sequence, args.open.options()?)? {
         let end = if args.frames == 0 { seq.frames.len() } else { (args.first + args.frames).min(seq.frames.len()) };
         if args.first >= end {
             return Err(Error::config(
@@ -84,6 +87,7 @@ pub fn run(args: &FragmentsArgs, out: &mut dyn Write) -> Result<()> {
                 format!("no frames of the {} frames of {} selected", seq.frames.len(), seq.name),
             ));
         }
+        let unposed;
         let (scene, clouds, n, names) = if args.single_frames {
             let working = WorkingConfig::default();
             let voxelize = VoxelizeConfig::default();
@@ -94,6 +98,8 @@ pub fn run(args: &FragmentsArgs, out: &mut dyn Write) -> Result<()> {
                 .collect();
             frames.sort_unstable();
             frames.dedup();
+            unposed = seq.unposed(frames.iter().copied(), args.strict)?;
+            frames.retain(|&f| seq.frames[f].has_pose());
             let pb = bar(frames.len() as u64, !args.quiet, "frames");
             let mut clouds = Vec::new();
             for f in frames {
@@ -110,17 +116,21 @@ pub fn run(args: &FragmentsArgs, out: &mut dyn Write) -> Result<()> {
                     format!("frames {}..{end} of {} hold no whole fragment of {per} frames", args.first, seq.name),
                 ));
             }
+            unposed = seq.unposed(ks[0] * stride..ks[ks.len() - 1] * stride + per, args.strict)?;
             let tsdf = TsdfConfig::threedmatch();
             let pb = bar(ks.len() as u64, !args.quiet, "fragments");
             let mut clouds = Vec::new();
             for k in ks {
-                clouds.push(fuse_fragment(&seq, k, per, stride, &tsdf, 1.0)?);
+                clouds.extend(fuse_fragment(&seq, k, per, stride, &tsdf, 1.0)?);
                 pb.inc(1);
             }
             pb.finish_and_clear();
             (seq.name.clone(), clouds, fragments_within(0, seq.frames.len(), per, stride).len(), ["3DMatch", "3DLoMatch"])
         };
         write_scene(args, &scene, &clouds, n, names, out)?;
+        if unposed > 0 || seq.poses.exact + seq.poses.interpolated > 0 {
+            writeln!(out, "{scene}: {}; {unposed} of the frames used left out for want of a pose", seq.poses.describe()).map_err(|e| Error::io("<stdout>", e))?;
+        }
     }
     Ok(())
 }

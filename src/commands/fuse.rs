@@ -4,18 +4,18 @@
 use crate::error::{Error, Result};
 use crate::geometry::relative_pose;
 use crate::ply;
-use crate::sources::{open_sequences, Layout};
+use crate::sources::open_sequences;
 use crate::tsdf::{TsdfConfig, TsdfVolume};
 use std::io::Write;
 use std::path::PathBuf;
 
 #[derive(Debug, clap::Args)]
 pub struct FuseArgs {
-    /// Sequence folder (3DMatch / 7-Scenes / SUN3D, TUM or ScanNet layout; frames need poses).
+    /// Sequence folder (3DMatch / 7-Scenes / SUN3D, TUM, ScanNet, or a plain folder with --layout folder);
+    /// frames without a camera pose are left out (counted).
     pub sequence: PathBuf,
-    /// Folder layout.
-    #[arg(long, value_enum, default_value = "auto")]
-    pub layout: Layout,
+    #[command(flatten)]
+    pub open: super::sequence_args::SequenceArgs,
     /// Index of the first frame (within the first sequence found).
     #[arg(long, default_value_t = 0)]
     pub first: usize,
@@ -39,7 +39,7 @@ pub struct FuseArgs {
 
 pub fn run(args: &FuseArgs, out: &mut dyn Write) -> Result<()> {
     let w = |e: std::io::Error| Error::io("<stdout>", e);
-    let seqs = open_sequences(&args.sequence, args.layout)?;
+    let seqs = open_sequences(&args.sequence, args.open.options()?)?;
     let seq = seqs.first().ok_or_else(|| Error::input(&args.sequence, "no sequence found"))?;
     let end = args.first + args.frames;
     if args.frames == 0 || end > seq.frames.len() {
@@ -50,7 +50,11 @@ pub fn run(args: &FuseArgs, out: &mut dyn Write) -> Result<()> {
     let mut volume = TsdfVolume::new(config)?;
     let bar = indicatif::ProgressBar::new(args.frames as u64);
     let mut t_world_from_base = None;
-    for f in &seq.frames[args.first..end] {
+    let unposed = seq.unposed(args.first..end, false)?;
+    if unposed == args.frames {
+        return Err(Error::input(&seq.frames[args.first].depth_path, format!("none of frames {}..{end} has a camera pose", args.first)));
+    }
+    for f in seq.frames[args.first..end].iter().filter(|f| f.has_pose()) {
         let frame = f.load()?;
         let pose = frame.t_world_from_camera.ok_or_else(|| Error::input(&frame.depth_path, "frame has no camera pose"))?;
         let base = *t_world_from_base.get_or_insert(pose);
@@ -65,10 +69,11 @@ pub fn run(args: &FuseArgs, out: &mut dyn Write) -> Result<()> {
     ply::write_mesh(&args.out.join("fused.mesh.ply"), &mesh.vertices, &mesh.triangles)?;
     writeln!(
         out,
-        "fused {} frames of {} ({} blocks): {} surface points, mesh {} vertices / {} triangles -> {}",
-        args.frames,
+        "fused {} frames of {} ({} blocks{}): {} surface points, mesh {} vertices / {} triangles -> {}",
+        args.frames - unposed,
         seq.name,
         volume.block_count(),
+        if unposed > 0 { format!("; {unposed} frame(s) without a camera pose left out") } else { String::new() },
         points.len(),
         mesh.vertices.len(),
         mesh.triangles.len(),

@@ -1,7 +1,7 @@
 //! `pointreggpt inspect`: list the sequences under a folder and check that their frames decode.
 
 use crate::error::{Error, Result};
-use crate::sources::{open_sequences, Layout};
+use crate::sources::open_sequences;
 use std::io::Write;
 use std::path::PathBuf;
 
@@ -9,9 +9,8 @@ use std::path::PathBuf;
 pub struct InspectArgs {
     /// Folder holding one or more sequences.
     pub root: PathBuf,
-    /// Folder layout; `auto` decides from marker files.
-    #[arg(long, value_enum, default_value = "auto")]
-    pub layout: Layout,
+    #[command(flatten)]
+    pub open: super::sequence_args::SequenceArgs,
     /// Decode every frame (depth PNG and pose) and report the ones that fail.
     #[arg(long)]
     pub check: bool,
@@ -19,12 +18,15 @@ pub struct InspectArgs {
 
 pub fn run(args: &InspectArgs, out: &mut dyn Write) -> Result<()> {
     let w = |e: std::io::Error| Error::io("<stdout>", e);
-    let sequences = open_sequences(&args.root, args.layout)?;
+    let sequences = open_sequences(&args.root, args.open.options()?)?;
     let mut failures = 0usize;
     for seq in &sequences {
         let with_pose = seq.frames.iter().filter(|f| f.pose != crate::sources::PoseSource::None).count();
         let k = seq.frames.first().map(|f| f.intrinsics);
         writeln!(out, "{}: {} frames ({} with a pose) in {}", seq.name, seq.frames.len(), with_pose, seq.root.display()).map_err(w)?;
+        if seq.poses.exact + seq.poses.interpolated > 0 {
+            writeln!(out, "  ground truth: {} (interpolated across gaps up to {} ms)", seq.poses.describe(), crate::sources::tum::MAX_INTERPOLATION_GAP * 1000.0).map_err(w)?;
+        }
         if let Some(k) = k {
             writeln!(out, "  intrinsics {}x{} fx={:.3} fy={:.3} cx={:.3} cy={:.3}", k.width, k.height, k.fx, k.fy, k.cx, k.cy).map_err(w)?;
         }

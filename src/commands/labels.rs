@@ -35,6 +35,9 @@ pub fn run(args: &LabelsArgs, out: &mut dyn Write) -> Result<()> {
     writeln!(out, "label dataset {} (config {})", dataset.display(), &config.dataset_hash()[..12]).map_err(w)?;
     writeln!(out, "{} windows in {} shards; worker {worker} of {workers}: {} already committed, {} committed now", r.windows, r.total_shards, r.already_committed, r.committed_now.len()).map_err(w)?;
     writeln!(out, "rows written: {} ({})", r.rows_by_status.values().sum::<u64>(), if by.is_empty() { "none".into() } else { by.join(", ") }).map_err(w)?;
+    if r.unposed.frames > 0 {
+        writeln!(out, "{} frame(s) without a camera pose left out of their windows; {} window(s) without any posed frame dropped", r.unposed.frames, r.unposed.windows).map_err(w)?;
+    }
     writeln!(out, "time {:.1} s, {:.2} windows/s", r.summary.wall.as_secs_f64(), r.summary.rate()).map_err(w)?;
     write!(out, "{}", r.summary.stage_table()).map_err(w)?;
     writeln!(out, "shards: {}/shards/labels-*.parquet (those listed in {}/manifest/)", dataset.display(), dataset.display()).map_err(w)?;

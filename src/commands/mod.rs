@@ -18,3 +18,4 @@ pub mod eval;
 pub mod eval_registration;
 pub mod eval_boost;
 pub mod fragments;
+pub mod sequence_args;

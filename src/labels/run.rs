@@ -25,13 +25,15 @@ pub struct LabelsReport {
     pub committed_now: Vec<u64>,
     pub rows_by_status: BTreeMap<String, u64>,
     pub summary: RunSummary,
+    /// Frames (and windows) left out for want of a camera pose.
+    pub unposed: super::windows::Unposed,
 }
 
 /// Runs the label pipeline into `opts.out` (resuming what is committed there).
 pub fn run_labels(config: &LabelsConfig, opts: &BuildOptions, cancel: &CancelToken) -> Result<LabelsReport> {
     config.validate()?;
     check_worker(opts.worker, opts.workers)?;
-    let (catalog, windows) = windows(config)?;
+    let (catalog, windows, unposed) = windows(config, opts.strict)?;
     let catalog = Arc::new(catalog);
     let total = windows.len() as u64;
     let total_shards = shard_count(config.shard_size, total);
@@ -81,5 +83,6 @@ pub fn run_labels(config: &LabelsConfig, opts: &BuildOptions, cancel: &CancelTok
         committed_now: sink.committed.clone(),
         rows_by_status: sink.rows_by_status.clone(),
         summary,
+        unposed,
     })
 }

@@ -6,7 +6,7 @@
 //! [`crate::shards::plan`].
 
 use super::synthetic::{SyntheticConfig, SyntheticSequence};
-use super::{open_sequences, Frame, FrameRef, Layout};
+use super::{open_sequences, CameraConfig, Frame, FrameRef, Layout, OpenOptions};
 use crate::error::{Error, Result};
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
@@ -31,14 +31,37 @@ pub enum SourceConfig {
     Directory {
         /// Folder holding the sequences (relative paths are relative to the working directory).
         path: PathBuf,
-        /// Folder layout; `auto` decides from marker files.
+        /// Folder layout; `auto` decides from marker files (`3dmatch`, `tum`, `scannet`); `folder` is a
+        /// plain folder of depth PNGs and needs `intrinsics` and `depth_scale`.
         #[serde(default = "auto_layout")]
         layout: Layout,
+        /// The depth camera `{ fx, fy, cx, cy }` in pixels of the stored images; replaces the layout's own.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        intrinsics: Option<CameraConfig>,
+        /// Raw depth units per metre (1000: millimetres; TUM 5000); replaces the layout's own.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        depth_scale: Option<f32>,
+        /// `folder` layout: a folder of `<image stem>.txt` 4×4 camera-to-world poses (optional; a build
+        /// needs none, labels and fragments use only the frames that have one).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        poses: Option<PathBuf>,
     },
 }
 
 fn auto_layout() -> Layout {
     Layout::Auto
+}
+
+impl SourceConfig {
+    /// How a `directory` source opens its folder (`None` for synthetic sources).
+    pub fn open_options(&self) -> Option<OpenOptions> {
+        match self {
+            SourceConfig::Synthetic { .. } => None,
+            SourceConfig::Directory { layout, intrinsics, depth_scale, poses, .. } => {
+                Some(OpenOptions { layout: *layout, intrinsics: *intrinsics, depth_scale: *depth_scale, poses: poses.clone() })
+            }
+        }
+    }
 }
 
 impl SourceConfig {
@@ -58,7 +81,7 @@ impl SourceConfig {
                 synthetic.intrinsics.validate().map_err(|e| Error::config("source.synthetic.intrinsics", e.to_string()))
             }
             SourceConfig::Directory { path, .. } if path.as_os_str().is_empty() => bad("source.path", "must name a folder"),
-            SourceConfig::Directory { .. } => Ok(()),
+            SourceConfig::Directory { .. } => self.open_options().expect("a directory source").validate("source."),
         }
     }
 }
@@ -110,6 +133,24 @@ pub struct CatalogFrame {
     pub origin: FrameOrigin,
 }
 
+impl CatalogFrame {
+    /// Whether the frame has a camera pose (synthetic frames always do).
+    pub fn has_pose(&self) -> bool {
+        match &self.origin {
+            FrameOrigin::Disk(f) => f.has_pose(),
+            FrameOrigin::Synthetic { .. } => true,
+        }
+    }
+
+    /// The depth file (or, for a synthetic frame, its key), for messages.
+    pub fn depth_path(&self) -> PathBuf {
+        match &self.origin {
+            FrameOrigin::Disk(f) => f.depth_path.clone(),
+            FrameOrigin::Synthetic { .. } => PathBuf::from(&self.key),
+        }
+    }
+}
+
 /// The selected frames of a build.
 pub struct Catalog {
     pub frames: Vec<CatalogFrame>,
@@ -134,8 +175,8 @@ impl Catalog {
                 }
                 synthetic.clone()
             }
-            SourceConfig::Directory { path, layout } => {
-                for seq in open_sequences(path, *layout)? {
+            SourceConfig::Directory { path, .. } => {
+                for seq in open_sequences(path, source.open_options().expect("a directory source"))? {
                     for i in select_indices(seq.frames.len(), select) {
                         let f = &seq.frames[i];
                         frames.push(CatalogFrame { scene: seq.name.clone(), key: f.key.clone(), origin: FrameOrigin::Disk(f.clone()) });

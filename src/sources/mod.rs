@@ -5,6 +5,7 @@
 
 pub mod catalog;
 pub mod depth_png;
+pub mod folder;
 pub mod scannet;
 pub mod synthetic;
 pub mod text;
@@ -17,6 +18,9 @@ use nalgebra::Isometry3;
 use std::path::{Path, PathBuf};
 
 pub use catalog::{Catalog, SelectConfig, SourceConfig};
+pub use options::{CameraConfig, OpenOptions, PoseCounts};
+
+mod options;
 
 /// Raw depth values that mean "no measurement" in 3DMatch / 7-Scenes / SUN3D / ScanNet PNGs.
 pub const INVALID_RAW_DEPTH: [u16; 2] = [0, 65535];
@@ -95,6 +99,14 @@ impl FrameRef {
     }
 }
 
+impl FrameRef {
+    /// Whether the sequence gives this frame a pose (a pose file, or a known pose). A pose file can
+    /// still fail to load (unparsable, non-finite): that is bad input, not a missing pose.
+    pub fn has_pose(&self) -> bool {
+        self.pose != PoseSource::None
+    }
+}
+
 /// An ordered list of frames from one capture.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Sequence {
@@ -102,13 +114,32 @@ pub struct Sequence {
     pub name: String,
     pub root: PathBuf,
     pub frames: Vec<FrameRef>,
+    /// How the frames got their poses (TUM: exact, interpolated, left without), for summaries.
+    pub poses: PoseCounts,
+}
+
+impl Sequence {
+    /// How many of `frames` (indices) have no pose. Under `strict` one is an error naming its file, for
+    /// the commands whose pairs take their truth from the poses (fragments, labels, real pairs); without
+    /// it they leave those frames out and report the count.
+    pub fn unposed(&self, frames: impl IntoIterator<Item = usize>, strict: bool) -> Result<usize> {
+        let missing: Vec<usize> = frames.into_iter().filter(|&f| !self.frames[f].has_pose()).collect();
+        match missing.first() {
+            Some(&f) if strict => Err(Error::input(
+                &self.frames[f].depth_path,
+                format!("frame has no camera pose ({} of the frames used from {} have none; without --strict they are left out)", missing.len(), self.name),
+            )),
+            _ => Ok(missing.len()),
+        }
+    }
 }
 
 /// The layouts [`open_sequences`] recognises.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "snake_case")]
 pub enum Layout {
-    /// Decide from the folder's content.
+    /// Decide from the folder's content (never `folder`: a plain folder needs its intrinsics given).
+    #[default]
     Auto,
     /// 3DMatch / 7-Scenes / SUN3D: `frame-XXXXXX.depth.png` + `.pose.txt`, flat or in `seq-XX/`.
     #[value(name = "3dmatch")]
@@ -118,20 +149,40 @@ pub enum Layout {
     Tum,
     /// ScanNet export: `depth/`, `pose/`, `intrinsic/intrinsic_depth.txt`.
     Scannet,
+    /// A plain folder of 16-bit depth PNGs; intrinsics and depth scale come from the config
+    /// (`source.intrinsics`, `source.depth_scale`), poses optionally from `source.poses`.
+    Folder,
 }
 
-/// Opens the sequences under `root` in the given layout (`Auto` looks at the folder).
-pub fn open_sequences(root: &Path, layout: Layout) -> Result<Vec<Sequence>> {
-    let layout = match layout {
+/// Opens the sequences under `root` with `options` (a [`Layout`] alone converts: the layout's own
+/// intrinsics, depth scale and poses). `Auto` looks at the folder; the intrinsics and depth scale of the
+/// options, when given, replace the layout's own.
+pub fn open_sequences(root: &Path, options: impl Into<OpenOptions>) -> Result<Vec<Sequence>> {
+    let options = options.into();
+    let layout = match options.layout {
         Layout::Auto => detect_layout(root)?,
         l => l,
     };
-    match layout {
-        Layout::ThreeDMatch => threedmatch::open(root),
-        Layout::Tum => Ok(vec![tum::open(root, None)?]),
-        Layout::Scannet => Ok(vec![scannet::open(root)?]),
+    let camera = |size: (u32, u32)| options.intrinsics.map(|c| c.at_size(size)).transpose();
+    let mut sequences = match layout {
+        Layout::ThreeDMatch => threedmatch::open(root)?,
+        Layout::Tum => vec![tum::open(root, None)?],
+        Layout::Scannet => vec![scannet::open(root)?],
+        Layout::Folder => vec![folder::open(root, &options)?],
         Layout::Auto => unreachable!(),
+    };
+    for seq in &mut sequences {
+        for f in &mut seq.frames {
+            if let Some(k) = camera((f.intrinsics.width, f.intrinsics.height)).map_err(|e| Error::config("source.intrinsics", e.to_string()))? {
+                f.intrinsics = k;
+            }
+            if let Some(scale) = options.depth_scale {
+                f.depth_scale = scale;
+            }
+        }
+        seq.poses.without = seq.frames.iter().filter(|f| !f.has_pose()).count();
     }
+    Ok(sequences)
 }
 
 /// Guesses the layout of `root` from marker files.

@@ -44,7 +44,7 @@ pub fn open(root: &Path) -> Result<Sequence> {
             }
         })
         .collect();
-    Ok(Sequence { name, root: root.to_path_buf(), frames })
+    Ok(Sequence { name, root: root.to_path_buf(), frames, poses: Default::default() })
 }
 
 #[cfg(test)]

@@ -53,10 +53,14 @@ pub fn open(root: &Path) -> Result<Vec<Sequence>> {
             .into_iter()
             .map(|(stem, depth_path)| frame_ref(&name, &dir, stem, depth_path, intrinsics))
             .collect();
-        sequences.push(Sequence { name, root: dir, frames });
+        sequences.push(Sequence { name, root: dir, frames, poses: Default::default() });
     }
     if sequences.is_empty() {
-        return Err(Error::input(root, "no frame-XXXXXX.depth.png files here or in seq-* sub-folders"));
+        return Err(Error::input(
+            root,
+            "no frame-XXXXXX.depth.png files here or in seq-* sub-folders (for a plain folder of depth PNGs use the \"folder\" layout, \
+             with the intrinsics and the depth scale: `layout = \"folder\"` in [source], or --layout folder --intrinsics fx,fy,cx,cy --depth-scale N)",
+        ));
     }
     Ok(sequences)
 }

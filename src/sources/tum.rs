@@ -1,8 +1,10 @@
 //! The TUM RGB-D layout: `depth.txt` listing depth PNGs (5000 units per metre) and `groundtruth.txt`
-//! holding camera-to-world poses, associated to depth frames by nearest timestamp.
+//! holding camera-to-world poses from motion capture, associated to depth frames by timestamp: the
+//! sample at the frame's time, or the pose interpolated between the two samples around it
+//! ([`associate`]).
 
 use super::threedmatch::folder_name;
-use super::{FrameRef, PoseSource, Sequence};
+use super::{FrameRef, PoseCounts, PoseSource, Sequence};
 use crate::error::{Error, Result};
 use crate::geometry::Intrinsics;
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
@@ -11,9 +13,16 @@ use std::path::Path;
 /// Raw depth units per metre of TUM depth PNGs.
 pub const DEPTH_SCALE: f32 = 5000.0;
 
-/// Largest timestamp difference (seconds) at which a ground-truth pose is associated to a depth frame
-/// (the tolerance of TUM's `associate.py`).
-pub const MAX_TIME_DIFFERENCE: f64 = 0.02;
+/// A depth timestamp within this of a ground-truth sample takes that sample's pose as it is, seconds
+/// (TUM writes ground-truth times to 0.1 ms).
+pub const EXACT_TIME: f64 = 1e-4;
+
+/// A depth frame between two consecutive ground-truth samples at most this far apart gets the pose
+/// interpolated between them (position linearly, rotation by slerp along the shorter arc), seconds. Both
+/// samples then lie within this of the frame's timestamp. The motion capture runs at 100 Hz, so up to
+/// nine missing samples are bridged; a frame in a longer gap, or before the first or after the last
+/// sample, has no pose.
+pub const MAX_INTERPOLATION_GAP: f64 = 0.1;
 
 /// The intrinsics used when none are given: the TUM ROS default for registered depth
 /// (fx = fy = 525, cx = 319.5, cy = 239.5, 640×480). The TUM sequences' depth images are registered
@@ -23,9 +32,10 @@ pub fn default_intrinsics() -> Intrinsics {
 }
 
 /// Opens the TUM sequence in `root`. Frames follow `depth.txt` sorted by timestamp; keys are
-/// `<root name>/<timestamp as written>`. Each frame gets the `groundtruth.txt` pose nearest in time
-/// when it is within [`MAX_TIME_DIFFERENCE`] ([`PoseSource::Known`]), else [`PoseSource::None`]; a
-/// sequence without `groundtruth.txt` has no poses. `intrinsics` defaults to [`default_intrinsics`].
+/// `<root name>/<timestamp as written>`. Each frame gets its pose from `groundtruth.txt` by
+/// [`associate`] ([`PoseSource::Known`]), else [`PoseSource::None`]; a sequence without
+/// `groundtruth.txt` has no poses. The counts go to [`Sequence::poses`]. `intrinsics` defaults to
+/// [`default_intrinsics`].
 /// Malformed lines fail with the file and line number; so do duplicate depth timestamps.
 pub fn open(root: &Path, intrinsics: Option<Intrinsics>) -> Result<Sequence> {
     let intrinsics = intrinsics.unwrap_or_else(default_intrinsics);
@@ -50,17 +60,28 @@ pub fn open(root: &Path, intrinsics: Option<Intrinsics>) -> Result<Sequence> {
 
     let gt_path = root.join("groundtruth.txt");
     let poses = if gt_path.is_file() { read_groundtruth(&gt_path)? } else { Vec::new() };
+    let mut counts = PoseCounts::default();
     let frames = depth
         .into_iter()
-        .map(|(t, stamp, rel, _)| FrameRef {
-            key: format!("{name}/{stamp}"),
-            depth_path: root.join(rel),
-            depth_scale: DEPTH_SCALE,
-            intrinsics,
-            pose: nearest_pose(&poses, t).map_or(PoseSource::None, PoseSource::Known),
+        .map(|(t, stamp, rel, _)| {
+            let pose = match associate(&poses, t) {
+                Association::Exact(p) => {
+                    counts.exact += 1;
+                    PoseSource::Known(p)
+                }
+                Association::Interpolated(p) => {
+                    counts.interpolated += 1;
+                    PoseSource::Known(p)
+                }
+                Association::None => {
+                    counts.without += 1;
+                    PoseSource::None
+                }
+            };
+            FrameRef { key: format!("{name}/{stamp}"), depth_path: root.join(rel), depth_scale: DEPTH_SCALE, intrinsics, pose }
         })
         .collect();
-    Ok(Sequence { name, root: root.to_path_buf(), frames })
+    Ok(Sequence { name, root: root.to_path_buf(), frames, poses: counts })
 }
 
 /// Reads `groundtruth.txt` (`timestamp tx ty tz qx qy qz qw`, camera-to-world) sorted by time.
@@ -87,19 +108,45 @@ pub fn read_groundtruth(path: &Path) -> Result<Vec<(f64, Isometry3<f64>)>> {
     Ok(poses)
 }
 
-/// The pose of `poses` (sorted by time) nearest to `t`, if within [`MAX_TIME_DIFFERENCE`]; on a tie
-/// the earlier one.
-fn nearest_pose(poses: &[(f64, Isometry3<f64>)], t: f64) -> Option<Isometry3<f64>> {
+/// How a depth timestamp got its pose.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Association {
+    /// A sample within [`EXACT_TIME`].
+    Exact(Isometry3<f64>),
+    /// Between two samples at most [`MAX_INTERPOLATION_GAP`] apart.
+    Interpolated(Isometry3<f64>),
+    /// No sample at the time, and none on one side or the gap around it too long.
+    None,
+}
+
+/// The pose of time `t` from `poses` (sorted by time): the nearest sample if within [`EXACT_TIME`]
+/// (on a tie the earlier), else the interpolation between the samples just before and just after `t`
+/// when they are at most [`MAX_INTERPOLATION_GAP`] apart.
+pub fn associate(poses: &[(f64, Isometry3<f64>)], t: f64) -> Association {
     let i = poses.partition_point(|(pt, _)| *pt < t);
-    let candidates = [i.checked_sub(1), Some(i)];
-    candidates
+    let exact = [i.checked_sub(1), Some(i)]
         .into_iter()
         .flatten()
         .filter_map(|j| poses.get(j))
         .map(|(pt, p)| ((pt - t).abs(), p))
-        .filter(|(dt, _)| *dt <= MAX_TIME_DIFFERENCE)
-        .min_by(|a, b| a.0.total_cmp(&b.0))
-        .map(|(_, p)| *p)
+        .filter(|(dt, _)| *dt <= EXACT_TIME)
+        .min_by(|a, b| a.0.total_cmp(&b.0));
+    if let Some((_, p)) = exact {
+        return Association::Exact(*p);
+    }
+    match (i.checked_sub(1).and_then(|j| poses.get(j)), poses.get(i)) {
+        (Some((t0, p0)), Some((t1, p1))) if t1 - t0 <= MAX_INTERPOLATION_GAP => Association::Interpolated(interpolate(p0, p1, (t - t0) / (t1 - t0))),
+        _ => Association::None,
+    }
+}
+
+/// The pose a fraction `s` of the way from `a` to `b`: translation linearly, rotation by slerp along the
+/// shorter arc (`q` and `−q` are the same rotation; the one nearer `a`'s is taken).
+pub fn interpolate(a: &Isometry3<f64>, b: &Isometry3<f64>, s: f64) -> Isometry3<f64> {
+    let qa = a.rotation;
+    let qb = if qa.coords.dot(&b.rotation.coords) < 0.0 { UnitQuaternion::new_unchecked(-b.rotation.into_inner()) } else { b.rotation };
+    let translation = a.translation.vector.lerp(&b.translation.vector, s);
+    Isometry3::from_parts(Translation3::from(translation), qa.slerp(&qb, s))
 }
 
 fn parse_time(tok: &str) -> std::result::Result<f64, String> {
@@ -122,7 +169,7 @@ fn data_lines(path: &Path) -> Result<Vec<(usize, Vec<String>)>> {
 mod tests {
     use super::*;
     use crate::sources::depth_png::write_depth_png;
-    use nalgebra::Vector3;
+    use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 
     const HEADER: &str = "# depth maps\n# file: 'rgbd_dataset_freiburg1_xyz.bag'\n# timestamp filename\n";
 
@@ -142,13 +189,13 @@ mod tests {
     }
 
     #[test]
-    fn lists_frames_and_associates_the_nearest_pose() {
+    fn lists_frames_with_exact_interpolated_and_missing_poses() {
         let depth = format!(
-            "{HEADER}1305031102.160407 depth/1305031102.160407.png\n\n1305031102.194330 depth/1305031102.194330.png\n1305031102.300000 depth/1305031102.300000.png\n"
+            "{HEADER}1305031102.160407 depth/1305031102.160407.png\n\n1305031102.197500 depth/1305031102.197500.png\n1305031102.300000 depth/1305031102.300000.png\n"
         );
-        // For 102.160407 the poses at 102.1475 (12.9 ms before) and 102.1675 (7.1 ms after) are both
-        // within 20 ms: the later, nearer one (x = 2) must win although it comes second. For
-        // 102.194330 the nearest is 102.1975 (x = 3). Nothing lies within 20 ms of 102.300000.
+        // 102.160407 lies between 102.1475 (x = 1, identity) and 102.1675 (x = 2, 90° about z), 20 ms
+        // apart: interpolated at s = 0.64535. 102.1975 is a sample: exact (x = 3). 102.3 lies after the
+        // last sample: no pose.
         let gt = "# ground truth trajectory\n# timestamp tx ty tz qx qy qz qw\n\
                   1305031102.1475 1.0 0.0 0.0 0 0 0 1\n\
                   1305031102.1675 2.0 0.0 0.0 0 0 0.7071068 0.7071068\n\
@@ -162,19 +209,76 @@ mod tests {
         let keys: Vec<&str> = s.frames.iter().map(|f| f.key.as_str()).collect();
         assert_eq!(
             keys,
-            ["rgbd_dataset_freiburg1_xyz/1305031102.160407", "rgbd_dataset_freiburg1_xyz/1305031102.194330", "rgbd_dataset_freiburg1_xyz/1305031102.300000"]
+            ["rgbd_dataset_freiburg1_xyz/1305031102.160407", "rgbd_dataset_freiburg1_xyz/1305031102.197500", "rgbd_dataset_freiburg1_xyz/1305031102.300000"]
         );
         assert_eq!(s.frames[0].depth_path, r.join("depth/1305031102.160407.png"));
         assert_eq!(s.frames[0].depth_scale, 5000.0);
         assert_eq!(s.frames[0].intrinsics, k);
+        assert_eq!(s.poses, PoseCounts { exact: 1, interpolated: 1, without: 1 });
 
         let PoseSource::Known(p0) = &s.frames[0].pose else { panic!("frame 0 has no pose") };
-        assert_eq!(p0.translation.vector, Vector3::new(2.0, 0.0, 0.0));
-        // 90° about z (qz = qw = √½): the camera x axis maps to world y.
-        assert!((p0.rotation * Vector3::x() - Vector3::y()).norm() < 1e-6);
+        let f = (0.160407 - 0.1475) / 0.02;
+        assert!((p0.translation.vector - Vector3::new(1.0 + f, 0.0, 0.0)).norm() < 1e-5, "{p0:?}");
+        assert!((p0.rotation.angle() - f * std::f64::consts::FRAC_PI_2).abs() < 1e-5);
         let PoseSource::Known(p1) = &s.frames[1].pose else { panic!("frame 1 has no pose") };
         assert_eq!(p1.translation.vector, Vector3::new(3.0, 0.5, -1.0));
         assert_eq!(s.frames[2].pose, PoseSource::None);
+    }
+
+    /// The analytic trajectory: position `(t, 2t, −t)` m, rotation `ω·t` about a fixed tilted axis
+    /// (slerp between two samples of a constant-rate rotation about a fixed axis is exact). Samples every
+    /// 10 ms over 1 s, some stored with the quaternion's sign flipped (`−q` is the same rotation); one
+    /// sample missing at 0.30 s (a 20 ms gap: bridged) and none from 0.505 to 0.695 s (a 200 ms gap:
+    /// longer than the bound).
+    #[test]
+    fn interpolation_matches_an_analytic_trajectory_whatever_the_quaternion_signs() {
+        let axis = nalgebra::Unit::new_normalize(Vector3::new(0.3, -1.0, 0.5));
+        let omega = 2.0; // rad/s
+        let truth = |t: f64| {
+            Isometry3::from_parts(Translation3::new(t, 2.0 * t, -t), UnitQuaternion::from_axis_angle(&axis, omega * t))
+        };
+        let mut gt = String::from("# timestamp tx ty tz qx qy qz qw\n");
+        for n in 0..=100 {
+            let t = n as f64 * 0.01;
+            if n == 30 || (51..=69).contains(&n) {
+                continue;
+            }
+            let p = truth(t);
+            let q = p.rotation.into_inner();
+            let sign = if n % 3 == 0 { -1.0 } else { 1.0 };
+            let v = p.translation.vector;
+            gt.push_str(&format!("{t:.4} {} {} {} {} {} {} {}\n", v.x, v.y, v.z, sign * q.i, sign * q.j, sign * q.k, sign * q.w));
+        }
+        let stamps = [0.1234, 0.2955, 0.3020, 0.45, 0.5100, 0.5975, 0.7012, 0.98, 1.2];
+        let depth: String = stamps.iter().map(|t| format!("{t:.6} depth/{t:.6}.png\n")).collect();
+        let tmp = fixture(&depth, Some(&gt));
+        let s = open(&root(&tmp), None).unwrap();
+        for (f, &t) in s.frames.iter().zip(&stamps) {
+            let expect_pose = !(0.5 < t && t < 0.7) && t <= 1.0;
+            match (&f.pose, expect_pose) {
+                (PoseSource::Known(p), true) => {
+                    let want = truth(t);
+                    assert!((p.translation.vector - want.translation.vector).norm() < 1e-9, "t = {t}: {p:?}");
+                    assert!(p.rotation.angle_to(&want.rotation) < 1e-9, "t = {t}: rotation off by {}", p.rotation.angle_to(&want.rotation));
+                }
+                (PoseSource::None, false) => {}
+                (got, _) => panic!("t = {t}: expected a pose: {expect_pose}, got {got:?}"),
+            }
+        }
+        // 0.45 and 0.98 are samples (exact); 0.51 and 0.5975 lie in the 200 ms gap, 1.2 after the last sample.
+        assert_eq!(s.poses, PoseCounts { exact: 2, interpolated: 4, without: 3 });
+    }
+
+    #[test]
+    fn interpolation_takes_the_shorter_arc() {
+        let a = Isometry3::from_parts(Translation3::new(0.0, 0.0, 0.0), UnitQuaternion::from_euler_angles(0.0, 0.0, 0.1));
+        let b = Isometry3::from_parts(Translation3::new(1.0, 0.0, 0.0), UnitQuaternion::from_euler_angles(0.0, 0.0, 0.3));
+        let flipped = Isometry3::from_parts(b.translation, UnitQuaternion::new_unchecked(-b.rotation.into_inner()));
+        for other in [b, flipped] {
+            let m = interpolate(&a, &other, 0.5);
+            assert!((m.rotation.euler_angles().2 - 0.2).abs() < 1e-12, "{:?}", m.rotation.euler_angles());
+            assert!((m.translation.x - 0.5).abs() < 1e-12);
+        }
     }
 
     #[test]

@@ -93,9 +93,6 @@ impl Ingest {
         let frame = self.catalog.load(unit.frame_index)?;
         unit.source_path = frame.depth_path.display().to_string();
         unit.source_hash = frame.content_hash.clone();
-        if frame.t_world_from_camera.is_none() {
-            return Err(Error::input(&frame.depth_path, "frame has no camera pose (missing pose file)"));
-        }
         let (depth, k) = self.working.map_frame(&frame)?;
         let memory = self.working.crop_box.crop(&backproject(&depth, &k, self.working.depth_range()));
         if memory.is_empty() {

@@ -43,17 +43,17 @@ fn pose_of(seq: &Sequence, f: usize) -> Result<(crate::sources::Frame, Isometry3
 
 /// Fuses fragment `k` (frames `stride·k … stride·k + per − 1` of `seq`; the official fragments have
 /// `stride = per`) with `tsdf` and returns its surface points (weight above `weight_threshold`) in the
-/// camera of frame `stride·k`.
-pub fn fuse_fragment(seq: &Sequence, k: usize, per: usize, stride: usize, tsdf: &TsdfConfig, weight_threshold: f32) -> Result<Cloud> {
+/// camera of frame `stride·k`. Frames without a pose are left out (the fragment is then in the camera
+/// of its first posed frame); `None` when no frame of the window has one.
+pub fn fuse_fragment(seq: &Sequence, k: usize, per: usize, stride: usize, tsdf: &TsdfConfig, weight_threshold: f32) -> Result<Option<Cloud>> {
     let mut volume = TsdfVolume::new(tsdf.clone())?;
     let mut base = None;
-    for f in stride * k..stride * k + per {
+    for f in (stride * k..stride * k + per).filter(|&f| seq.frames[f].has_pose()) {
         let (frame, pose) = pose_of(seq, f)?;
         let t_world_from_base = *base.get_or_insert(pose);
         volume.integrate(&frame.depth, &frame.intrinsics, &relative_pose(&t_world_from_base, &pose))?;
     }
-    let t_world_from_camera = base.ok_or_else(|| Error::InvalidArgument("empty fragment".into()))?;
-    Ok(Cloud { index: k, points: volume.extract_points(weight_threshold), t_world_from_camera })
+    Ok(base.map(|t_world_from_camera| Cloud { index: k, points: volume.extract_points(weight_threshold), t_world_from_camera }))
 }
 
 /// The fragments `k` whose frames `stride·k … stride·k + per − 1` all lie in `first .. end`.
@@ -64,7 +64,8 @@ pub fn fragments_within(first: usize, end: usize, per: usize, stride: usize) -> 
 }
 
 /// Frame `f`'s cloud as a build makes it: the working resolution and intrinsics, back-projection within
-/// the depth range, the crop box, the voxel grid (`working`, `voxelize`).
+/// the depth range, the crop box, the voxel grid (`working`, `voxelize`). The frame must have a pose
+/// (callers leave unposed frames out: [`Sequence::unposed`]).
 pub fn single_frame_cloud(
     seq: &Sequence,
     f: usize,

@@ -8,12 +8,20 @@ use crate::registration::EvalConfig;
 use crate::training::descriptor::train::DescriptorTrainOptions;
 use std::path::PathBuf;
 
-/// Everything a boost run needs.
-pub struct BoostConfig {
-    /// The posed training sequence and its frames `first .. first + frames`.
-    pub sequence: PathBuf,
+/// One training sequence: its folder and frames `first .. first + frames`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TrainingSequence {
+    pub path: PathBuf,
     pub first: usize,
     pub frames: usize,
+}
+
+/// Everything a boost run needs.
+pub struct BoostConfig {
+    /// The training sequences (one or more; real pairs and generated pairs come from each).
+    pub sequences: Vec<TrainingSequence>,
+    /// Frames without a camera pose are an error (default: left out of the real pairs and counted).
+    pub strict: bool,
     /// Real single-frame pairs: a source frame every `real_every` frames, partners `real_gaps` frames later.
     pub real_every: usize,
     pub real_gaps: Vec<usize>,

@@ -34,12 +34,12 @@ pub struct OverlapPair {
     pub unit: Option<u64>,
 }
 
-/// The one posed sequence at `path` (any layout `fragments` reads).
+/// The one sequence at `path` (any layout `fragments` reads).
 pub fn open_one(path: &Path) -> Result<Sequence> {
     let mut seqs = open_sequences(path, Layout::Auto)?;
     match seqs.len() {
         1 => Ok(seqs.remove(0)),
-        n => Err(Error::input(path, format!("holds {n} sequences; eval boost trains on one (give its folder)"))),
+        n => Err(Error::input(path, format!("holds {n} sequences; give each sequence's folder as its own --sequence"))),
     }
 }
 
@@ -68,13 +68,15 @@ fn truth_pairs(seq: &Sequence, clouds: &[Cloud], truths: Vec<PairTruth>, tag: &s
 
 /// Real pairs (f, f + g) of frames `first .. first + frames` (both frames in the range) for f every
 /// `every` frames and g in `gaps`, with overlap of at least 10 %: source = frame f + g, target = frame f,
-/// the pose from the captured camera poses. `tick` after each frame's cloud.
+/// the pose from the captured camera poses; frames without a pose are left out. `tick` after each frame.
 pub fn real_pairs(seq: &Sequence, first: usize, frames: usize, every: usize, gaps: &[usize], tick: &mut dyn FnMut()) -> Result<Vec<OverlapPair>> {
     let end = (first + frames).min(seq.frames.len());
     let (working, voxelize) = (WorkingConfig::default(), VoxelizeConfig::default());
     let mut clouds = Vec::new();
     for f in first..end {
-        clouds.push(single_frame_cloud(seq, f, &working, &voxelize)?);
+        if seq.frames[f].has_pose() {
+            clouds.push(single_frame_cloud(seq, f, &working, &voxelize)?);
+        }
         tick();
     }
     let keep = |i: usize, j: usize| (i - first) % every.max(1) == 0 && gaps.contains(&(j - i));
@@ -85,7 +87,7 @@ pub fn real_pairs(seq: &Sequence, first: usize, frames: usize, every: usize, gap
 /// Real pairs of fused fragments of frames `first .. first + frames`: fragment k fuses frames
 /// `stride·k … stride·k + per − 1` (TSDF with the 3DMatch settings, as `fragments --stride` does),
 /// voxelised at 2.5 cm; every pair of fragments with overlap of at least 10 % (3DMatch and 3DLoMatch).
-/// `tick` after each fragment.
+/// Frames without a pose are left out of their fragments. `tick` after each fragment.
 pub fn fragment_pairs(seq: &Sequence, first: usize, frames: usize, per: usize, stride: usize, tick: &mut dyn FnMut()) -> Result<Vec<OverlapPair>> {
     let end = (first + frames).min(seq.frames.len());
     let ks = fragments_within(first, end, per, stride);
@@ -95,9 +97,10 @@ pub fn fragment_pairs(seq: &Sequence, first: usize, frames: usize, per: usize, s
     let tsdf = TsdfConfig::threedmatch();
     let mut clouds = Vec::new();
     for k in ks {
-        let mut c = fuse_fragment(seq, k, per, stride, &tsdf, 1.0)?;
-        c.points = voxel_downsample(&c.points, BENCH_VOXEL_M);
-        clouds.push(c);
+        if let Some(mut c) = fuse_fragment(seq, k, per, stride, &tsdf, 1.0)? {
+            c.points = voxel_downsample(&c.points, BENCH_VOXEL_M);
+            clouds.push(c);
+        }
         tick();
     }
     let truths = pair_truths(&clouds, clouds.len(), 1.0, &|_, _| true);

@@ -4,7 +4,7 @@
 use super::conditions::{Condition, Generator, Real, Source};
 use super::data::{fragment_pairs, generated_pairs, generator_config, open_one, real_pairs, OverlapPair, SourceFrames};
 use super::histogram::{histogram, match_histogram, EDGES};
-use super::config::BoostConfig;
+use super::config::{BoostConfig, TrainingSequence};
 use crate::error::Result;
 use crate::registration::evaluate::sample_indices;
 use crate::rng::Rng;
@@ -22,6 +22,8 @@ fn for_draw(base: Rng, d: u64) -> Rng {
 /// The pools the training pairs are drawn from: every real candidate pair of each kind and every pair
 /// each generator built (with the seed of its build).
 pub struct Pools {
+    /// Facts about the pools (frames left out for want of a pose).
+    pub notes: Vec<String>,
     single: Option<Vec<OverlapPair>>,
     fragments: Option<Vec<OverlapPair>>,
     generated: BTreeMap<Generator, (Vec<OverlapPair>, u64)>,
@@ -68,20 +70,42 @@ fn base_count(c: &Condition, data: &TrainingData, pairs: usize) -> usize {
 
 pub fn build_pools(cfg: &BoostConfig, todo: &[&Condition], log: &mut dyn FnMut(&str)) -> Result<Pools> {
     let uses = |r: fn(&Real) -> bool| todo.iter().any(|c| c.reals().any(|x| r(&x)));
-    let seq = if uses(|_| true) { Some(open_one(&cfg.sequence)?) } else { None };
+    let mut notes = Vec::new();
+    let seqs = if uses(|_| true) {
+        let mut seqs = Vec::new();
+        for t in &cfg.sequences {
+            let seq = open_one(&t.path)?;
+            let unposed = seq.unposed(t.first..(t.first + t.frames).min(seq.frames.len()), cfg.strict)?;
+            if unposed > 0 {
+                notes.push(format!("{}: {unposed} of frames {}..{} have no camera pose: left out of the real pairs ({})", seq.name, t.first, t.first + t.frames, seq.poses.describe()));
+            }
+            seqs.push(seq);
+        }
+        seqs
+    } else {
+        Vec::new()
+    };
     let mut single = None;
     if uses(|r| *r == Real::Single) {
-        log(&format!("making the real single-frame pairs of frames {}..{}", cfg.first, cfg.first + cfg.frames));
-        let bar = crate::runtime::progress::bar(cfg.frames as u64, cfg.progress, "frames");
-        single = Some(real_pairs(seq.as_ref().expect("opened"), cfg.first, cfg.frames, cfg.real_every, &cfg.real_gaps, &mut || bar.inc(1))?);
-        bar.finish_and_clear();
+        let mut pairs = Vec::new();
+        for (seq, t) in seqs.iter().zip(&cfg.sequences) {
+            log(&format!("making the real single-frame pairs of {} frames {}..{}", seq.name, t.first, t.first + t.frames));
+            let bar = crate::runtime::progress::bar(t.frames as u64, cfg.progress, "frames");
+            pairs.extend(real_pairs(seq, t.first, t.frames, cfg.real_every, &cfg.real_gaps, &mut || bar.inc(1))?);
+            bar.finish_and_clear();
+        }
+        single = Some(pairs);
     }
     let mut fragments = None;
     if uses(|r| matches!(r, Real::Fragments(_))) {
-        log(&format!("fusing fragments of {} frames every {} frames of frames {}..{}", cfg.fragment_frames, cfg.fragment_stride, cfg.first, cfg.first + cfg.frames));
-        let bar = crate::runtime::progress::bar(0, cfg.progress, "fragments");
-        fragments = Some(fragment_pairs(seq.as_ref().expect("opened"), cfg.first, cfg.frames, cfg.fragment_frames, cfg.fragment_stride, &mut || bar.inc(1))?);
-        bar.finish_and_clear();
+        let mut pairs = Vec::new();
+        for (seq, t) in seqs.iter().zip(&cfg.sequences) {
+            log(&format!("fusing fragments of {} frames every {} frames of {} frames {}..{}", cfg.fragment_frames, cfg.fragment_stride, seq.name, t.first, t.first + t.frames));
+            let bar = crate::runtime::progress::bar(0, cfg.progress, "fragments");
+            pairs.extend(fragment_pairs(seq, t.first, t.frames, cfg.fragment_frames, cfg.fragment_stride, &mut || bar.inc(1))?);
+            bar.finish_and_clear();
+        }
+        fragments = Some(pairs);
     }
     let mut gens: Vec<Generator> = todo.iter().flat_map(|c| c.generators()).collect();
     if single.is_some() {
@@ -103,21 +127,32 @@ pub fn build_pools(cfg: &BoostConfig, todo: &[&Condition], log: &mut dyn FnMut(&
         .chain([cfg.pairs])
         .max()
         .unwrap_or(cfg.pairs);
-    let sources = match cfg.source_frames {
-        SourceFrames::EveryFrame => cfg.frames,
-        SourceFrames::FragmentStarts { per, stride } => {
-            crate::registration::benchmark::make::fragments_within(cfg.first, cfg.first + cfg.frames, per, stride).len()
-        }
+    let sources_of = |t: &TrainingSequence| match cfg.source_frames {
+        SourceFrames::EveryFrame => t.frames,
+        SourceFrames::FragmentStarts { per, stride } => crate::registration::benchmark::make::fragments_within(t.first, t.first + t.frames, per, stride).len(),
     };
+    let sources: usize = cfg.sequences.iter().map(sources_of).sum();
     let samples_per_frame = ((needed as f64 * 1.25 / sources.max(1) as f64).ceil() as u32).max(1);
     let mut generated = BTreeMap::new();
     for g in gens {
         log(&format!("building the {} generator's pairs ({} per source frame of {} source frames)", g.name(), samples_per_frame, sources));
-        let config = generator_config(&cfg.classical, g, &cfg.models, &cfg.sequence, (cfg.first, cfg.frames), cfg.source_frames, samples_per_frame)?;
-        let pairs = generated_pairs(&config, &cfg.out.join("data").join(g.name()), cfg.progress)?;
-        generated.insert(g, (pairs, config.seed));
+        let mut pairs = Vec::new();
+        let mut seed = 0;
+        for (k, t) in cfg.sequences.iter().enumerate() {
+            let config = generator_config(&cfg.classical, g, &cfg.models, &t.path, (t.first, t.frames), cfg.source_frames, samples_per_frame)?;
+            // One sequence keeps the layout of a single-sequence run; several get a dataset each, their
+            // units numbered apart so pairs of different generators still pair up by unit.
+            let out = cfg.out.join("data").join(g.name());
+            let out = if cfg.sequences.len() == 1 { out } else { out.join(format!("{k}")) };
+            pairs.extend(generated_pairs(&config, &out, cfg.progress)?.into_iter().map(|mut p| {
+                p.unit = p.unit.map(|u| u + ((k as u64) << 40));
+                p
+            }));
+            seed = config.seed;
+        }
+        generated.insert(g, (pairs, seed));
     }
-    Ok(Pools { single, fragments, generated })
+    Ok(Pools { single, fragments, generated, notes })
 }
 
 /// Draw `d` of the training pairs from the pools (draw 0: the protocol's), with its facts in `notes`.

@@ -75,9 +75,11 @@ fn training_settings(cfg: &BoostConfig) -> serde_json::Value {
     // Per-unit fields are set by the run; the rest is what a unit trains with.
     let train = DescriptorTrainOptions { seed: 0, resume: true, progress: false, ..cfg.train.clone() };
     serde_json::json!({
-        "sequence": canonical(&cfg.sequence),
-        "first": cfg.first,
-        "frames": cfg.frames,
+        // One sequence keeps the keys a single-sequence run always recorded (so its runs resume).
+        "sequence": (cfg.sequences.len() == 1).then(|| canonical(&cfg.sequences[0].path)),
+        "first": (cfg.sequences.len() == 1).then(|| cfg.sequences[0].first),
+        "frames": (cfg.sequences.len() == 1).then(|| cfg.sequences[0].frames),
+        "sequences": (cfg.sequences.len() > 1).then(|| cfg.sequences.iter().map(|t| serde_json::json!({"path": canonical(&t.path), "first": t.first, "frames": t.frames})).collect::<Vec<_>>()),
         "real_every": cfg.real_every,
         "real_gaps": cfg.real_gaps,
         "fragment_frames": cfg.fragment_frames,
@@ -112,8 +114,8 @@ fn score_all(benches: &[Benchmark], d: &Descriptor, eval: &EvalConfig) -> Result
 
 /// Runs (or resumes) the protocol and writes `<out>/boost.txt`, `boost.csv` and `boost-paired.csv`.
 pub fn run_boost(cfg: &BoostConfig, log: &mut dyn FnMut(&str)) -> Result<BoostReport> {
-    if cfg.conditions.is_empty() || cfg.seeds == 0 || cfg.pairs == 0 || cfg.frames == 0 || cfg.bench.is_empty() {
-        return Err(Error::config("eval boost", "benchmarks, conditions, --seeds, --pairs and --frames must not be empty or zero"));
+    if cfg.conditions.is_empty() || cfg.seeds == 0 || cfg.pairs == 0 || cfg.sequences.is_empty() || cfg.sequences.iter().any(|t| t.frames == 0) || cfg.bench.is_empty() {
+        return Err(Error::config("eval boost", "benchmarks, conditions, sequences, --seeds, --pairs and --frames must not be empty or zero"));
     }
     let mut benches: Vec<Benchmark> = Vec::new();
     for b in &cfg.bench {
@@ -136,7 +138,9 @@ pub fn run_boost(cfg: &BoostConfig, log: &mut dyn FnMut(&str)) -> Result<BoostRe
         None
     } else {
         let conds: Vec<&Condition> = to_train.iter().map(|u| u.0).collect();
-        Some(build_pools(cfg, &conds, log)?)
+        let pools = build_pools(cfg, &conds, log)?;
+        notes.extend(pools.notes.iter().cloned());
+        Some(pools)
     };
     // The draws the units to train need, each made once.
     let mut draws: BTreeMap<u64, TrainingData> = BTreeMap::new();
