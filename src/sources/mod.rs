@@ -110,7 +110,8 @@ pub struct Sequence {
 pub enum Layout {
     /// Decide from the folder's content.
     Auto,
-    /// 3DMatch / 7-Scenes / SUN3D: `frame-XXXXXX.depth.png` + `.pose.txt`, flat or in `seq-XX/`.
+    /// 3DMatch / 7-Scenes / SUN3D: `frame-XXXXXX.depth.png` + `.pose.txt`, flat or in `seq-XX/`, in one
+    /// scene folder or in each scene folder of the given one.
     #[value(name = "3dmatch")]
     #[serde(rename = "3dmatch")]
     ThreeDMatch,
