@@ -2,10 +2,10 @@
 //! "report dim 8 / 16 / 32 with their ms per view"; the fill's budget is 100 ms per 256² view on 2 cores).
 //!
 //! The refiner is the product's own path, `DiffusionInpainter` with `start = "background"`, one DDIM
-//! step from step 0, η 0 (the setting `docs/diffusion.md` measured): the background fill, one forward of
-//! the denoiser, the range–null-space step. Its cost does not depend on the weights, so each width is an
-//! untrained denoiser of the tiny preset's shape (levels 1, 2, 4, 8, no attention) at dim 8 (the tiny
-//! preset itself), 16 and 32. The view has the holes of a camera move: a synthetic room's exact depth at
+//! step from step 0, η 0 (the setting `docs/lab/2026-12-03-fills-against-peers.md` measured): the
+//! background fill, one forward of the denoiser, the range–null-space step. Its cost does not depend on
+//! the weights, so each width is an untrained denoiser of the tiny preset's shape (levels 1, 2, 4, 8, no
+//! attention) at dim 8 (the tiny preset itself), 16 and 32. The view has the holes of a camera move: a synthetic room's exact depth at
 //! frame 0 z-buffered into the camera of frame 40 at 256×256. Each refiner is timed one view at a time
 //! and as two concurrent workers with their own refiner (how a build on 2 cores runs it), views one at a
 //! time or 4 per forward pass (`[inpaint] batch = 4`); the background fill alone (the shipped default)

@@ -36,14 +36,15 @@ pub enum Command {
     Query(commands::query::QueryArgs),
     /// Check every committed shard of a dataset against its manifest entry (size, blake3, schema, rows).
     Verify(commands::verify::VerifyArgs),
-    /// Bring the dataset's Delta Lake table (`_delta_log/`, read by Spark, Trino, Polars, DuckDB, deltalake)
-    /// up to date with its committed shards; rebuilds the log from the manifest when it is missing.
+    /// Bring the dataset's Delta Lake table (`_delta_log/`, for Delta readers such as deltalake, Polars or
+    /// DuckDB) up to date with its committed shards; rebuilds the log from the manifest when it is missing.
     Publish(commands::publish::PublishArgs),
-    /// List the sequences and frames found under a folder (3DMatch / 7-Scenes / SUN3D, TUM, ScanNet),
-    /// checking that every frame decodes.
+    /// List the sequences and frames found under a folder (3DMatch / 7-Scenes / SUN3D, TUM, ScanNet) with
+    /// their intrinsics; `--check` also decodes every frame (depth PNG and pose) and reports the ones that fail.
     Inspect(commands::inspect::InspectArgs),
     /// Export pairs for trainers: the PointRegGPT authors' layout (gt.log), GeoTransformer's 3DMatch
-    /// pickle + .npy, or PLY pairs; `--where` filters rows, `--limit` caps the count.
+    /// pickle + .pth clouds (`--cloud-format npy`: .npy), or PLY pairs; `--where` filters rows, `--limit`
+    /// caps the count.
     Export(commands::export::ExportArgs),
     /// Write one PNG montage per pair: depth maps, condition with unknown pixels, known mask, inpainted
     /// target, and both clouds aligned by the stored pose.
@@ -51,11 +52,13 @@ pub enum Command {
     /// Rows by status (reject reasons) and overlap histograms, as stats.txt and a stats.png bar plot.
     Stats(commands::stats::StatsArgs),
     /// Train a network: `train correction` fits the depth-correction U-Net to label shards,
-    /// `train diffusion` the diffusion denoiser to depth frames (checkpoints, resumable).
+    /// `train diffusion` the diffusion denoiser to depth frames, `train descriptor` the registration patch
+    /// descriptor to a dataset's pairs (checkpoints, resumable).
     Train(commands::train::TrainArgs),
     /// Evaluate: `eval correction` compares the handcrafted filters and U-Net checkpoints on held-out
     /// label shards; `eval inpaint` compares correction and fill methods with the depth captured on real
-    /// sequences; `eval registration` scores a descriptor on a registration benchmark (FMR, IR, RR).
+    /// sequences; `eval registration` scores a descriptor on a registration benchmark (FMR, IR, RR);
+    /// `eval boost` trains the descriptor on several training sets and compares them on a benchmark.
     /// Tables and CSV.
     Eval(commands::eval::EvalArgs),
 }

@@ -437,8 +437,8 @@ fn the_shipped_checkpoint_beats_the_handcrafted_filters_on_held_out_scenes() {
             .join("; ")
     );
     // The target is +10 mIoU points at tau_m 0.5. The shipped tiny network reaches +10.5 on the 64 held-out
-    // maps of docs/correction.md and +8.1 on these 32 (docs/correction.md): asserted is a margin it keeps on
-    // both, and far fewer wrong depths kept at 0.99.
+    // maps of docs/lab/2026-12-01-correction-tiny-training-and-evaluation.md and +8.1 on these 32 (same
+    // entry): asserted is a margin it keeps on both, and far fewer wrong depths kept at 0.99.
     assert!(u05.miou > best_miou + 0.07, "U-Net mIoU@0.5 {:.4} vs best filter {:.4}", u05.miou, best_miou);
     assert!(u099.fp_per_map < 0.1 * least_fp, "U-Net FP/map@0.99 {:.1} vs filters {:.1}", u099.fp_per_map, least_fp);
 }

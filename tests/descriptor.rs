@@ -86,7 +86,7 @@ fn training_lowers_the_loss_and_matches_unseen_pairs_better_than_the_untrained_n
 
     // The checkpoint is a `--descriptor` of `eval registration`: scored on the same single-frame pairs of
     // an unseen synthetic sequence as raw FPFH. (At this budget it does not beat FPFH yet: 6.4 % vs 6.6 %
-    // IR; docs/registration.md has the numbers. The test checks the wiring: the same pairs, a real IR.)
+    // IR; docs/lab/2026-12-02-patch-descriptor-first-measurement.md has the numbers. The test checks the wiring: the same pairs, a real IR.)
     let seq = dir.path().join("seq");
     let bench = dir.path().join("bench");
     let run_ok = |args: &[&str]| {

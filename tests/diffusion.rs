@@ -595,7 +595,7 @@ fn the_shipped_fill_model_beats_push_pull_on_unseen_real_views_and_the_earlier_m
     let holes = fill_scores(&real, "models/diffusion-tiny-holes.safetensors", 1, 0, dir.path());
     let refine = fill_scores(&real, "models/diffusion-tiny-refine.safetensors", 1, 0, dir.path());
     let all_steps = fill_scores(&real, "models/diffusion-tiny.safetensors", 5, 5, dir.path());
-    // docs/diffusion.md has the 18-view table. These 4 views measured, holes vs push-pull AbsRel / delta:
+    // docs/lab/2026-12-01-diffusion-fills-on-real-views.md has the 18-view table. These 4 views measured, holes vs push-pull AbsRel / delta:
     // no correction 0.0900 / 88.4 % vs 0.0952 / 87.8 %, min-pool 0.0847 / 89.5 % vs 0.0912 / 88.2 %,
     // U-Net 0.0519 vs 0.0507; RMSE with min-pool 0.274 vs 0.270 here (level on the 18 views), without
     // correction 0.282 vs 0.267.
@@ -609,7 +609,7 @@ fn the_shipped_fill_model_beats_push_pull_on_unseen_real_views_and_the_earlier_m
     let (pp, d) = (at(&holes, "unet@0.99", "push_pull"), at(&holes, "unet@0.99", "diffusion"));
     assert!(d.abs_rel < 1.05 * pp.abs_rel, "unet: AbsRel {} vs push-pull {}", d.abs_rel, pp.abs_rel);
     // The shipped default fill (background) beats push-pull and the hole-aware refiner on AbsRel, RMSE and
-    // delta without correction and with min-pool (docs/diffusion.md has the 30-view tables).
+    // delta without correction and with min-pool (docs/lab/2026-12-03-fills-against-peers.md has the 30-view tables).
     for c in ["none", "min_pool"] {
         let (bg, pp, d) = (at(&holes, c, "background"), at(&holes, c, "push_pull"), at(&holes, c, "diffusion"));
         for other in [pp, d] {

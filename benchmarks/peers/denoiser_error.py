@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Clean-frame denoising error of diffusion checkpoints, per time step (docs/diffusion.md, "refine model").
+"""Clean-frame denoising error of diffusion checkpoints, per time step (docs/lab/2026-12-01-diffusion-tiny-models.md).
 
 Usage: denoiser_error.py SEQUENCE_DIR CHECKPOINT [CHECKPOINT ...]
 

@@ -16,8 +16,8 @@ use std::path::{Path, PathBuf};
 
 #[derive(Debug, clap::Args)]
 pub struct DemoArgs {
-    /// Output folder (created if missing).
-    #[arg(long, default_value = "out/demo")]
+    /// Output folder (created if missing). Not `out/demo`, which is where `make demo` puts its dataset.
+    #[arg(long, default_value = "out/demo-one-pair")]
     pub out: PathBuf,
     /// Seed of the synthetic scene and of the pose draw.
     #[arg(long, default_value_t = 7)]

@@ -1,4 +1,5 @@
-//! `pointreggpt inspect`: list the sequences under a folder and check that their frames decode.
+//! `pointreggpt inspect`: list the sequences under a folder; with `--check`, also check that their frames
+//! decode.
 
 use crate::error::{Error, Result};
 use crate::sources::open_sequences;

@@ -10,7 +10,7 @@ use std::path::PathBuf;
 #[derive(Debug, clap::Args)]
 #[command(after_help = "Each montage shows, left to right: the source depth, the re-projected condition (grey = unknown \
 pixels), the known mask, the inpainted target (one Turbo depth scale per montage, black = no depth), and both clouds \
-rendered into the target camera with the stored pose (red = source, green = target, yellow = both at the same depth). \
+rendered into the target camera with the stored pose (red = source, green = target, yellow = both clouds at the pixel, their depths less than 5 cm apart). \
 --where takes a SQL predicate over the pairs table, as `pointreggpt export` does, e.g. --where \"status = 'low_overlap' \
 and scene like 'scene0%'\".")]
 pub struct PreviewArgs {

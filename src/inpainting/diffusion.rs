@@ -28,8 +28,8 @@ pub struct DiffusionInpaintConfig {
     #[serde(default = "official_eta")]
     pub eta: f64,
     /// Where the chain starts: `noise` (official: pure noise at step 999), `push_pull` or `background`
-    /// (the known pixels and that classical fill, noised to `start_step`; see `docs/diffusion.md` for the
-    /// measurement).
+    /// (the known pixels and that classical fill, noised to `start_step`; the measurements are in
+    /// `docs/lab/`, from `docs/diffusion.md`).
     #[serde(default)]
     pub start: Start,
     /// The step a `push_pull` start is noised to (0..=999).

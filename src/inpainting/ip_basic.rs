@@ -9,7 +9,7 @@
 //! It is here as the classical CPU depth completion a practitioner would pick (issue 17's peer; the same
 //! scores as `benchmarks/peers/fill_peers.py`'s OpenCV version). On re-projection holes it fills only the
 //! pixels its 31×31 dilation reaches, a quarter to a half of a large hole, and scores below
-//! [`super::Background`] on those same pixels (docs/diffusion.md).
+//! [`super::Background`] on those same pixels (docs/lab/2026-12-03-fills-against-peers.md).
 
 use super::{InpaintContext, Inpainter};
 use crate::geometry::DepthMap;

@@ -11,7 +11,8 @@ pub const UNKNOWN: Rgb = [150, 150, 150];
 pub const BACKGROUND: Rgb = [32, 32, 36];
 /// Text.
 pub const TEXT: Rgb = [235, 235, 235];
-/// The source cloud, the target cloud, and pixels both cover at about the same depth.
+/// The source cloud, the target cloud, and pixels both cover with depths less than 5 cm apart
+/// (`montage::BOTH_METRES`).
 pub const SOURCE: Rgb = [255, 64, 32];
 pub const TARGET: Rgb = [40, 220, 60];
 pub const BOTH: Rgb = [255, 230, 40];

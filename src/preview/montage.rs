@@ -1,6 +1,7 @@
 //! One pair as a PNG montage: source depth, condition (unknown pixels grey), known mask, inpainted
 //! target — colour-mapped with one depth scale shared by the montage — and both clouds rendered into
-//! the target camera with the stored pose (source red, target green, yellow where both meet).
+//! the target camera with the stored pose (source red, target green, yellow where both cover a pixel with
+//! depths less than 5 cm apart).
 
 use super::canvas::{text_height, Canvas, Rgb};
 use super::colormap::{shade, turbo, BACKGROUND, BOTH, INVALID, SOURCE, TARGET, TEXT, UNKNOWN};

@@ -141,7 +141,8 @@ pub enum Layout {
     /// Decide from the folder's content (never `folder`: a plain folder needs its intrinsics given).
     #[default]
     Auto,
-    /// 3DMatch / 7-Scenes / SUN3D: `frame-XXXXXX.depth.png` + `.pose.txt`, flat or in `seq-XX/`.
+    /// 3DMatch / 7-Scenes / SUN3D: `frame-XXXXXX.depth.png` + `.pose.txt`, flat or in `seq-XX/`, in one
+    /// scene folder or in each scene folder of the given one.
     #[value(name = "3dmatch")]
     #[serde(rename = "3dmatch")]
     ThreeDMatch,

@@ -1,5 +1,6 @@
 //! The 3DMatch / 7-Scenes / SUN3D RGB-D layout: `frame-XXXXXX.depth.png` + `frame-XXXXXX.pose.txt`,
-//! flat in the root or in `seq-XX/` folders, with a 3×3 `camera-intrinsics.txt` in the root.
+//! flat in the root or in `seq-XX/` folders, with a 3×3 `camera-intrinsics.txt` in the root; or a folder
+//! of such scene folders (3DMatch's RGB-D download unpacked side by side).
 
 use super::{text, FrameRef, PoseSource, Sequence};
 use crate::error::{Error, Result};
@@ -18,11 +19,37 @@ pub const INTRINSICS_NAMES: [&str; 2] = ["camera-intrinsics.txt", "intrinsics.K.
 /// `<root name>/<seq folder>/frame-XXXXXX` (`<root name>/frame-XXXXXX` for flat frames). A frame
 /// without a pose file gets [`PoseSource::None`].
 ///
+/// When `root` itself holds no frames (neither flat nor in `seq-*`), it is a folder of scenes: every
+/// other sub-folder (in name order) is opened as a scene the same way, one level deep, with keys
+/// `<scene folder>/<seq folder>/frame-XXXXXX`; sub-folders without frames are skipped.
+///
 /// Intrinsics come from the sequence folder's own intrinsics file when it has one, else from the
-/// root's; the image size is read from the PNG header of the sequence's first readable frame.
+/// scene's; the image size is read from the PNG header of the sequence's first readable frame.
 /// Fails when `root` cannot be read, when there are no frames at all, or when a sequence has no
-/// intrinsics file (the error names `root`).
+/// intrinsics file (the error names the scene folder).
 pub fn open(root: &Path) -> Result<Vec<Sequence>> {
+    let mut sequences = open_scene(root)?;
+    if sequences.is_empty() {
+        let mut scenes: Vec<(String, PathBuf)> =
+            list_dir(root)?.into_iter().filter(|(name, path)| !name.starts_with("seq-") && path.is_dir()).collect();
+        scenes.sort();
+        for (_, scene) in scenes {
+            sequences.extend(open_scene(&scene)?);
+        }
+    }
+    if sequences.is_empty() {
+        return Err(Error::input(
+            root,
+            "no frame-XXXXXX.depth.png files here, in seq-* sub-folders, or in scene folders holding them (for a plain folder \
+             of depth PNGs use the \"folder\" layout with the intrinsics and the depth scale: `layout = \"folder\"` in [source], or \
+             --layout folder --intrinsics fx,fy,cx,cy --depth-scale N)",
+        ));
+    }
+    Ok(sequences)
+}
+
+/// The sequences of one scene folder (flat frames and `seq-*` sub-folders); empty when it has none.
+fn open_scene(root: &Path) -> Result<Vec<Sequence>> {
     let root_name = folder_name(root);
     let mut folders: Vec<(PathBuf, String)> = vec![(root.to_path_buf(), String::new())];
     let mut subs: Vec<String> = list_dir(root)?
@@ -54,13 +81,6 @@ pub fn open(root: &Path) -> Result<Vec<Sequence>> {
             .map(|(stem, depth_path)| frame_ref(&name, &dir, stem, depth_path, intrinsics))
             .collect();
         sequences.push(Sequence { name, root: dir, frames, poses: Default::default() });
-    }
-    if sequences.is_empty() {
-        return Err(Error::input(
-            root,
-            "no frame-XXXXXX.depth.png files here or in seq-* sub-folders (for a plain folder of depth PNGs use the \"folder\" layout, \
-             with the intrinsics and the depth scale: `layout = \"folder\"` in [source], or --layout folder --intrinsics fx,fy,cx,cy --depth-scale N)",
-        ));
     }
     Ok(sequences)
 }
@@ -201,6 +221,33 @@ mod tests {
         assert_eq!(seqs[1].frames[0].key, "sun3d-room/seq-02/frame-000005");
         assert_eq!(seqs[1].frames[0].depth_path, root.join("seq-02/frame-000005.depth.png"));
         assert_eq!(seqs[0].root, root.join("seq-01"));
+    }
+
+    #[test]
+    fn a_folder_of_scenes_gives_every_scene_in_name_order_with_its_own_intrinsics() {
+        let tmp = tempfile::tempdir().unwrap();
+        let root = tmp.path().join("rgbd");
+        frame(&root.join("sun3d-b/seq-01"), 3, true);
+        frame(&root.join("7-scenes-a/seq-02"), 1, true);
+        frame(&root.join("7-scenes-a/seq-01"), 0, true);
+        frame(&root.join("flat-c"), 9, false);
+        std::fs::create_dir_all(root.join("notes")).unwrap(); // no frames: skipped
+        text::write_intrinsics_file(&root.join("7-scenes-a/camera-intrinsics.txt"), &k(8, 6)).unwrap();
+        let k_sun3d = Intrinsics::new(570.0, 570.0, 3.5, 2.5, 8, 6).unwrap();
+        text::write_intrinsics_file(&root.join("sun3d-b/camera-intrinsics.txt"), &k_sun3d).unwrap();
+        text::write_intrinsics_file(&root.join("flat-c/intrinsics.K.txt"), &k(8, 6)).unwrap();
+
+        let seqs = open(&root).unwrap();
+        let names: Vec<&str> = seqs.iter().map(|s| s.name.as_str()).collect();
+        assert_eq!(names, ["7-scenes-a/seq-01", "7-scenes-a/seq-02", "flat-c", "sun3d-b/seq-01"]);
+        assert_eq!(seqs[3].frames[0].key, "sun3d-b/seq-01/frame-000003");
+        assert_eq!(seqs[3].frames[0].intrinsics.fx, 570.0);
+        assert_eq!(seqs[2].frames[0].pose, PoseSource::None);
+
+        // A scene without intrinsics is an error naming it, not a skipped scene.
+        frame(&root.join("d-noK"), 0, true);
+        let e = open(&root).unwrap_err().to_string();
+        assert!(e.contains("d-noK") && e.contains("camera-intrinsics.txt"), "{e}");
     }
 
     #[test]

@@ -1,7 +1,8 @@
 //! A Delta Lake table over the committed `pairs` shards, in `<dataset>/_delta_log/`: the dataset's root
 //! is the table's root and each committed shard file (`shards/pairs-000042.parquet`, or its unique object
-//! on a store) is one data file. Spark, Trino, Databricks, Polars, DuckDB and the `deltalake` package read
-//! it natively, and see only committed shards (a `*.parquet` glob also reads withdrawn or uncommitted files).
+//! on a store) is one data file. Delta readers read it natively (the `deltalake` package, and Polars and
+//! DuckDB through it, are tested; Spark, Trino and Databricks are not), and see only committed shards (a
+//! `*.parquet` glob also reads withdrawn or uncommitted files).
 //!
 //! # The manifest stays the truth; the log is a view of it
 //!
