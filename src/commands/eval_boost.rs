@@ -59,6 +59,8 @@ pub struct EvalBoostArgs {
     /// pair's source lie in them).
     #[arg(long, default_value_t = 200)]
     pub frames: usize,
+    #[command(flatten)]
+    pub open: super::sequence_args::SequenceArgs,
     /// Stop at a training frame without a camera pose (default: leave such frames out of the real pairs
     /// and count them; generated pairs need no pose).
     #[arg(long)]
@@ -167,6 +169,7 @@ pub fn run(a: &EvalBoostArgs, out: &mut dyn Write) -> Result<()> {
     let sequences = a.sequence.iter().map(|s| parse_sequence(s, a.first, a.frames)).collect::<Result<Vec<_>>>()?;
     let cfg = BoostConfig {
         sequences,
+        open: a.open.options()?,
         strict: a.strict,
         real_every: a.real_every,
         real_gaps: a.real_gaps.clone(),

@@ -5,6 +5,7 @@ use super::conditions::{Condition, Generator};
 use super::data::SourceFrames;
 use crate::pipeline::BuildConfig;
 use crate::registration::EvalConfig;
+use crate::sources::OpenOptions;
 use crate::training::descriptor::train::DescriptorTrainOptions;
 use std::path::PathBuf;
 
@@ -20,6 +21,8 @@ pub struct TrainingSequence {
 pub struct BoostConfig {
     /// The training sequences (one or more; real pairs and generated pairs come from each).
     pub sequences: Vec<TrainingSequence>,
+    /// How the sequences are opened (layout, and intrinsics / depth scale replacing the layout's own).
+    pub open: OpenOptions,
     /// Frames without a camera pose are an error (default: left out of the real pairs and counted).
     pub strict: bool,
     /// Real single-frame pairs: a source frame every `real_every` frames, partners `real_gaps` frames later.

@@ -12,7 +12,7 @@ use crate::registration::benchmark::make::{fragments_within, fuse_fragment, pair
 use crate::runtime::CancelToken;
 use crate::shards::dataset::Dataset;
 use crate::shards::Status;
-use crate::sources::{open_sequences, Layout, Sequence};
+use crate::sources::{open_sequences, OpenOptions, Sequence, SourceConfig};
 use crate::stages::ingest::WorkingConfig;
 use crate::stages::voxelize::VoxelizeConfig;
 use crate::training::descriptor::data::{TrainPair, BENCH_VOXEL_M};
@@ -35,8 +35,8 @@ pub struct OverlapPair {
 }
 
 /// The one sequence at `path` (any layout `fragments` reads).
-pub fn open_one(path: &Path) -> Result<Sequence> {
-    let mut seqs = open_sequences(path, Layout::Auto)?;
+pub fn open_one(path: &Path, options: &OpenOptions) -> Result<Sequence> {
+    let mut seqs = open_sequences(path, options.clone())?;
     match seqs.len() {
         1 => Ok(seqs.remove(0)),
         n => Err(Error::input(path, format!("holds {n} sequences; give each sequence's folder as its own --sequence"))),
@@ -125,13 +125,20 @@ pub fn generator_config(
     classical: &BuildConfig,
     generator: Generator,
     models: &Path,
-    sequence: &Path,
+    (sequence, open): (&Path, &OpenOptions),
     (first, frames): (usize, usize),
     from: SourceFrames,
     samples_per_frame: u32,
 ) -> Result<BuildConfig> {
     let mut doc: toml::Table = classical.to_toml().parse().map_err(|e: toml::de::Error| Error::Internal(format!("classical config: {e}")))?;
-    let path = toml::Value::String(sequence.display().to_string());
+    let source = SourceConfig::Directory {
+        path: sequence.to_path_buf(),
+        layout: open.layout,
+        intrinsics: open.intrinsics,
+        depth_scale: open.depth_scale,
+        poses: open.poses.clone(),
+    };
+    let source = toml::Value::try_from(&source).map_err(|e| Error::Internal(format!("source: {e}")))?;
     let select = match from {
         SourceFrames::EveryFrame => format!("{{ every = 1, offset = {first}, max_per_sequence = {frames} }}"),
         SourceFrames::FragmentStarts { per, stride } => {
@@ -139,8 +146,8 @@ pub fn generator_config(
             format!("{{ every = {stride}, offset = {first}, max_per_sequence = {n} }}")
         }
     };
+    doc.insert("source".to_string(), source);
     let mut sets = vec![
-        ("source".to_string(), format!(r#"{{ kind = "directory", path = {path}, layout = "auto" }}"#)),
         ("select".to_string(), select),
         ("samples_per_frame".to_string(), samples_per_frame.to_string()),
     ];

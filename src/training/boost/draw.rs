@@ -74,7 +74,7 @@ pub fn build_pools(cfg: &BoostConfig, todo: &[&Condition], log: &mut dyn FnMut(&
     let seqs = if uses(|_| true) {
         let mut seqs = Vec::new();
         for t in &cfg.sequences {
-            let seq = open_one(&t.path)?;
+            let seq = open_one(&t.path, &cfg.open)?;
             let unposed = seq.unposed(t.first..(t.first + t.frames).min(seq.frames.len()), cfg.strict)?;
             if unposed > 0 {
                 notes.push(format!("{}: {unposed} of frames {}..{} have no camera pose: left out of the real pairs ({})", seq.name, t.first, t.first + t.frames, seq.poses.describe()));
@@ -139,7 +139,7 @@ pub fn build_pools(cfg: &BoostConfig, todo: &[&Condition], log: &mut dyn FnMut(&
         let mut pairs = Vec::new();
         let mut seed = 0;
         for (k, t) in cfg.sequences.iter().enumerate() {
-            let config = generator_config(&cfg.classical, g, &cfg.models, &t.path, (t.first, t.frames), cfg.source_frames, samples_per_frame)?;
+            let config = generator_config(&cfg.classical, g, &cfg.models, (&t.path, &cfg.open), (t.first, t.frames), cfg.source_frames, samples_per_frame)?;
             // One sequence keeps the layout of a single-sequence run; several get a dataset each, their
             // units numbered apart so pairs of different generators still pair up by unit.
             let out = cfg.out.join("data").join(g.name());

@@ -18,6 +18,7 @@ use crate::export::rows::sanitize;
 use crate::registration::benchmark::{find_benchmarks, Benchmark};
 use crate::registration::{evaluate, Descriptor, EvalConfig, PairScore};
 use crate::training::descriptor::data::TrainPair;
+use crate::sources::OpenOptions;
 use crate::training::descriptor::train::{train_descriptor, DescriptorTrainOptions, LATEST};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -87,6 +88,8 @@ fn training_settings(cfg: &BoostConfig) -> serde_json::Value {
         "source_frames": cfg.source_frames,
         "reference": cfg.reference.name(),
         "pairs": cfg.pairs,
+        // Only when given, so the runs made before these options existed still resume.
+        "open": (cfg.open != OpenOptions::default()).then(|| format!("{:?}", cfg.open)),
         "train": train,
         "classical": cfg.classical,
         "models": canonical(&cfg.models),
