@@ -175,10 +175,14 @@ fn a_plain_depth_folder_builds_pairs() {
     }
     let k = text::read_numbers(&src.join("camera-intrinsics.txt")).unwrap();
     let camera = format!("{},{},{},{}", k[0], k[4], k[2], k[5]);
-    let cfg = dir.path().join("build.toml");
-    std::fs::write(&cfg, format!("shard_size = 6\n{}", source_toml(&plain, &camera, "folder", "depth_scale = 1000\n"))).unwrap();
+    // The shipped example config, with this folder and this camera.
+    let example = Path::new(env!("CARGO_MANIFEST_DIR")).join("pipelines/depth-folder.toml");
+    let c: Vec<&str> = camera.split(',').collect();
     let out = dir.path().join("ds");
-    run_ok(&["build", cfg.to_str().unwrap(), "--out", out.to_str().unwrap(), "--no-progress"]);
+    run_ok(&[
+        "build", example.to_str().unwrap(), "--out", out.to_str().unwrap(), "--no-progress", "--set", &format!("source.path={}", plain.display()),
+        "--set", &format!("source.intrinsics={{ fx = {}, fy = {}, cx = {}, cy = {} }}", c[0], c[1], c[2], c[3]), "--set", "shard_size=6",
+    ]);
     let rows = Dataset::open(&out).unwrap().read_pairs().unwrap();
     assert_eq!(rows.len(), 12);
     assert_eq!(rows[0].frame_key, "phone/depth_0");
