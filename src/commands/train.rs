@@ -35,7 +35,8 @@ shifted), min-SNR, 3000 steps."
 )]
 pub struct TrainDiffusionArgs {
     /// Training frames: a pipeline TOML (its [source], [select] and [working] are used, e.g.
-    /// pipelines/demo.toml) or a folder of depth sequences. Repeat to combine.
+    /// pipelines/demo.toml; its relative paths are relative to its folder) or a folder of depth sequences.
+    /// Repeat to combine.
     #[arg(long, required = true)]
     pub data: Vec<PathBuf>,
     /// Network size.

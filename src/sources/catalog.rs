@@ -29,7 +29,7 @@ pub enum SourceConfig {
     },
     /// Depth sequences on disk.
     Directory {
-        /// Folder holding the sequences (relative paths are relative to the working directory).
+        /// Folder holding the sequences (a relative path in a config file is relative to the file's folder).
         path: PathBuf,
         /// Folder layout; `auto` decides from marker files.
         #[serde(default = "auto_layout")]
@@ -42,6 +42,13 @@ fn auto_layout() -> Layout {
 }
 
 impl SourceConfig {
+    /// Calls `visit` on each path of the section, with its key (see [`crate::config_paths`]).
+    pub fn for_each_path(&mut self, visit: &mut dyn FnMut(&str, &mut PathBuf)) {
+        if let SourceConfig::Directory { path, .. } = self {
+            visit("source.path", path);
+        }
+    }
+
     /// Checks ranges before any work starts; errors name the key under `source`.
     pub fn validate(&self) -> Result<()> {
         let bad = |k: &str, m: &str| Err(Error::config(k, m));

@@ -86,7 +86,8 @@ fn training_settings(cfg: &BoostConfig) -> serde_json::Value {
         "reference": cfg.reference.name(),
         "pairs": cfg.pairs,
         "train": train,
-        "classical": cfg.classical,
+        // Its paths as its file wrote them: the same settings wherever the run starts.
+        "classical": crate::config_paths::relative_to_folder(&cfg.classical),
         "models": canonical(&cfg.models),
     })
 }
