@@ -1,7 +1,8 @@
 //! Paths that work from anywhere and clear first errors, run through the real binary from temporary
 //! working directories: a config's relative paths resolve against the config file's folder and `--set`
 //! values against the working directory; a build resumes from another working directory or a moved config
-//! folder, but not with another checkpoint; and the built-in default models work from any folder.
+//! folder, but not with another checkpoint; the built-in default models work from any folder; and text that
+//! looks like a URL but is not one is refused before anything is written.
 
 mod support;
 
@@ -159,4 +160,41 @@ fn the_built_in_default_checkpoint_is_found_from_any_folder() {
     // A built-in name that does not exist is refused, listing those that do.
     let e = failed(run(&work, &["eval", "correction", "--labels", "labels", "--out", "e.csv", "--checkpoint", "builtin:models/x.safetensors"]));
     assert!(e.contains("builtin:models/correction-tiny.safetensors"), "{e}");
+}
+
+#[test]
+fn text_that_looks_like_a_url_is_refused_before_anything_is_written() {
+    let tmp = tempfile::tempdir().unwrap();
+    let cwd = dir(tmp.path().join("empty"));
+    let demo = root().join("pipelines/demo.toml");
+    let labels = root().join("pipelines/labels-demo.toml");
+    let (demo, labels) = (demo.to_str().unwrap(), labels.to_str().unwrap());
+    let bad = "s3:/bucket/x";
+    let cases: Vec<(Vec<&str>, &str)> = vec![
+        (vec!["build", demo, "--out", bad], "s3://bucket/x"),
+        (vec!["build", demo, "--out", "s3:bucket"], "s3://bucket"),
+        (vec!["build", demo, "--out", "s4://bucket/x"], "unknown URL scheme `s4`"),
+        (vec!["labels", labels, "--out", "az:/container/x"], "az://container/x"),
+        (vec!["query", bad, "select 1"], "s3://bucket/x"),
+        (vec!["verify", "gs:/b/x"], "gs://b/x"),
+        (vec!["publish", bad], "s3://bucket/x"),
+        (vec!["export", bad, "--out", "o"], "s3://bucket/x"),
+        (vec!["preview", bad, "--out", "o"], "s3://bucket/x"),
+        (vec!["stats", bad, "--out", "o"], "s3://bucket/x"),
+        (vec!["train", "descriptor", "--data", bad, "--out", "o"], "s3://bucket/x"),
+        (vec!["eval", "correction", "--labels", bad, "--out", "o.csv"], "s3://bucket/x"),
+        (vec!["export", "ds", "--out", "s3://bucket/x"], "local files only"),
+        (vec!["stats", "ds", "--out", "file:/tmp/x"], "file:///tmp/x"),
+    ];
+    for (args, says) in cases {
+        let e = failed(run(&cwd, &args));
+        assert!(e.contains(says), "{args:?}: {e}");
+        let left: Vec<_> = std::fs::read_dir(&cwd).unwrap().map(|e| e.unwrap().file_name()).collect();
+        assert!(left.is_empty(), "{args:?} wrote {left:?}");
+    }
+    let e = failed(run(&cwd, &["build", demo, "--out", bad]));
+    assert!(e.contains("./s3:/bucket/x") && e.contains("s3://bucket/prefix"), "how to write a local name, the supported forms: {e}");
+    // A local folder whose name has a colon, written as a path, is a folder.
+    let out = ok(run(&cwd, &build_args(demo, "./s3:x", &SMALL_DEMO)));
+    assert!(cwd.join("s3:x/dataset.toml").is_file(), "{out}");
 }

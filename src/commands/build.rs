@@ -33,7 +33,7 @@ pub struct RunArgs {
     /// Dataset folder or object-store URL (s3://bucket/prefix, gs://bucket/prefix, az://container/prefix;
     /// credentials and endpoint from the usual AWS_*, GOOGLE_*, AZURE_* variables or ~/.aws profile);
     /// created, or resumed when it holds a dataset with the same config. Default: out/<config file stem>.
-    #[arg(long)]
+    #[arg(long, value_parser = crate::commands::locations::dataset)]
     pub out: Option<PathBuf>,
     /// Override a config value (repeatable), e.g. --set voxelize.voxel=0.03 --set source.path=/data/3dmatch.
     /// A relative path given here is relative to the working directory.

@@ -84,7 +84,7 @@ pub struct EvalInpaintArgs {
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     /// CSV file to write.
-    #[arg(long)]
+    #[arg(long, value_parser = crate::commands::locations::local_output)]
     pub out: PathBuf,
     /// No progress bar.
     #[arg(long)]
@@ -113,7 +113,7 @@ filters (min-pool and 3x3 median, 0.0375 m) have no tau_m and are reported once.
 )]
 pub struct EvalCorrectionArgs {
     /// Held-out label dataset(s): folders or object-store URLs; repeat to combine.
-    #[arg(long, required = true)]
+    #[arg(long, required = true, value_parser = crate::commands::locations::dataset)]
     pub labels: Vec<PathBuf>,
     /// U-Net checkpoint with DepthAugment; default the built-in tiny U-Net.
     #[arg(long, default_value = "builtin:models/correction-tiny.safetensors")]
@@ -122,7 +122,7 @@ pub struct EvalCorrectionArgs {
     #[arg(long)]
     pub checkpoint_noaug: Option<PathBuf>,
     /// CSV file to write.
-    #[arg(long)]
+    #[arg(long, value_parser = crate::commands::locations::local_output)]
     pub out: PathBuf,
     /// cpu, cuda or cuda:N.
     #[arg(long, default_value = "cpu")]

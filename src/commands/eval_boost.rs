@@ -117,7 +117,7 @@ pub struct EvalBoostArgs {
     #[arg(long, default_value_t = 0)]
     pub eval_seed: u64,
     /// Output folder (datasets, checkpoints, scores, tables).
-    #[arg(long)]
+    #[arg(long, value_parser = crate::commands::locations::local_output)]
     pub out: PathBuf,
     /// No progress bars.
     #[arg(long)]
