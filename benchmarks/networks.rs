@@ -522,12 +522,9 @@ fn run_tiny() -> TinyRun {
 fn demo_fill_seconds(depth: Vec<f32>, known: &[bool]) -> std::result::Result<(f64, String), String> {
     use pointreggpt::geometry::{DepthMap, Intrinsics};
     use pointreggpt::inpainting::{InpaintConfig, InpaintContext};
-    use pointreggpt::correction::CorrectionConfig;
-    use pointreggpt::nn::ModelPath;
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let name = "pipelines/demo.toml";
-    let text = std::fs::read_to_string(root.join(name)).map_err(|e| format!("{name}: {e}"))?;
-    let mut config = pointreggpt::pipeline::BuildConfig::from_toml(&text, name).map_err(|e| e.to_string())?;
+    // Its model paths resolve against its folder.
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("pipelines/demo.toml");
+    let config: pointreggpt::pipeline::BuildConfig = pointreggpt::pipeline::load::load_toml(&path, &[]).map_err(|e| e.to_string())?;
     let desc = match &config.inpaint {
         InpaintConfig::Diffusion(c) => format!(
             "{}, {} steps from {:?} at step {}, eta {}",
@@ -535,17 +532,6 @@ fn demo_fill_seconds(depth: Vec<f32>, known: &[bool]) -> std::result::Result<(f6
         ),
         other => format!("{other:?}"),
     };
-    // Model paths are relative to the repository root (where the README runs the demo): resolve them
-    // here rather than change the process's working directory.
-    let resolve = |p: ModelPath| ModelPath::new(&root.join(p.as_path()).to_string_lossy());
-    for method in [&mut config.correct.condition, &mut config.correct.output] {
-        if let CorrectionConfig::Unet { checkpoint, .. } = method {
-            *checkpoint = resolve(*checkpoint);
-        }
-    }
-    if let InpaintConfig::Diffusion(c) = &mut config.inpaint {
-        c.checkpoint = resolve(c.checkpoint);
-    }
     config.validate().map_err(|e| e.to_string())?;
     let inpainter = config.inpaint.build().map_err(|e| e.to_string())?;
     let n = SIZE as u32;

@@ -4,6 +4,7 @@
 pub mod atomic;
 pub mod cli;
 pub mod commands;
+pub mod config_paths;
 pub mod correction;
 pub mod diffusion;
 pub mod error;

@@ -685,24 +685,11 @@ fn a_torchscript_denoiser_samples_like_the_native_one() {
     assert!(err.to_string().contains("denoiser.pt"), "{err}");
 }
 
-/// A shipped pipeline config with its relative model paths resolved against the repository root (where
-/// the README runs them), so the test needs no change of the process-wide working directory.
+/// A shipped pipeline config, loaded as `build` loads it (its relative model paths resolve against its
+/// folder, so the test needs no change of the process-wide working directory).
 fn shipped_pipeline(name: &str) -> pointreggpt::Result<BuildConfig> {
-    use pointreggpt::correction::CorrectionConfig;
-    use pointreggpt::inpainting::InpaintConfig;
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let text = std::fs::read_to_string(root.join("pipelines").join(name)).unwrap();
-    let mut c = BuildConfig::from_toml(&text, name)?;
-    let resolve = |p: ModelPath| ModelPath::new(root.join(p.as_path()).to_str().unwrap());
-    for method in [&mut c.correct.condition, &mut c.correct.output] {
-        if let CorrectionConfig::Unet { checkpoint, .. } = method {
-            *checkpoint = resolve(*checkpoint);
-        }
-    }
-    if let InpaintConfig::Diffusion(d) = &mut c.inpaint {
-        d.checkpoint = resolve(d.checkpoint);
-    }
-    Ok(c)
+    // Its checkpoint paths resolve against its folder, wherever the test runs.
+    pointreggpt::pipeline::load::load_toml(&Path::new(env!("CARGO_MANIFEST_DIR")).join("pipelines").join(name), &[])
 }
 
 #[test]

@@ -235,8 +235,8 @@ impl Drop for Cluster {
 }
 
 /// pipelines/demo.toml made small: 320 units at 160×120 (working size 64), two per shard: 160 shards, 40 per task.
+/// (Its checkpoint path is relative to its folder, so the jobs find it from their temporary folder.)
 fn demo_overrides() -> Vec<String> {
-    let model = format!("{}/models/correction-tiny.safetensors", env!("CARGO_MANIFEST_DIR"));
     [
         "source.scenes=2",
         "source.synthetic.frames=160",
@@ -252,8 +252,6 @@ fn demo_overrides() -> Vec<String> {
     ]
     .iter()
     .map(|s| s.to_string())
-    // The demo's checkpoint path is relative to the checkout; the jobs run in a temporary folder.
-    .chain([format!("correct.condition.checkpoint={model}"), format!("correct.output.checkpoint={model}")])
     .flat_map(|s| ["--set".to_string(), s])
     .collect()
 }

@@ -1,7 +1,7 @@
 //! `pointreggpt build`: turn depth frames into a dataset of registration pairs.
 
 use crate::error::{Error, Result};
-use crate::pipeline::overrides::apply_override;
+pub use crate::pipeline::load::load_toml;
 use crate::pipeline::{run_build, BuildConfig, BuildOptions};
 use crate::runtime::CancelToken;
 use crate::shards::dataset::Dataset;
@@ -16,7 +16,8 @@ builds the shards k with k mod N = i. An interrupted build resumes where it stop
 On an object store (no rename) each shard is an immutable object under a unique name, committed by creating its \
 manifest entry with a create-only put (schemas/store-protocol.md).")]
 pub struct BuildArgs {
-    /// Pipeline config (TOML), for example pipelines/demo.toml.
+    /// Pipeline config (TOML), for example pipelines/demo.toml. Relative paths inside it (source folders,
+    /// checkpoints) are relative to its folder; `builtin:models/<file>` names a model built into the binary.
     pub config: PathBuf,
     #[command(flatten)]
     pub run: RunArgs,
@@ -32,9 +33,10 @@ pub struct RunArgs {
     /// Dataset folder or object-store URL (s3://bucket/prefix, gs://bucket/prefix, az://container/prefix;
     /// credentials and endpoint from the usual AWS_*, GOOGLE_*, AZURE_* variables or ~/.aws profile);
     /// created, or resumed when it holds a dataset with the same config. Default: out/<config file stem>.
-    #[arg(long)]
+    #[arg(long, value_parser = crate::commands::locations::dataset)]
     pub out: Option<PathBuf>,
     /// Override a config value (repeatable), e.g. --set voxelize.voxel=0.03 --set source.path=/data/3dmatch.
+    /// A relative path given here is relative to the working directory.
     #[arg(long = "set", value_name = "KEY=VALUE")]
     pub set: Vec<String>,
     /// This worker's index, 0-based. Default: $SLURM_ARRAY_TASK_ID (minus $SLURM_ARRAY_TASK_MIN),
@@ -62,16 +64,6 @@ impl RunArgs {
         let out = self.out.clone().unwrap_or_else(|| PathBuf::from("out").join(config.file_stem().unwrap_or_default()));
         Ok(BuildOptions { out, worker, workers, strict: self.strict, progress: !self.no_progress })
     }
-}
-
-/// Reads a pipeline config file of any kind and applies `--set` overrides.
-pub fn load_toml<T: serde::de::DeserializeOwned>(path: &Path, set: &[String]) -> Result<T> {
-    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
-    let mut doc: toml::Table = text.parse().map_err(|e: toml::de::Error| Error::config(path.display().to_string(), e.to_string()))?;
-    for s in set {
-        apply_override(&mut doc, s)?;
-    }
-    toml::Value::Table(doc).try_into().map_err(|e: toml::de::Error| crate::pipeline::config::config_error(&path.display().to_string(), &e))
 }
 
 /// Reads and validates a build config.
@@ -117,7 +109,7 @@ pub fn run(args: &BuildArgs, out: &mut dyn Write) -> Result<()> {
     let r = run_build(&config, &opts, &cancel)?;
 
     let rows: u64 = r.rows_by_status.values().sum();
-    writeln!(out, "dataset {} (config {})", dataset.display(), &config.dataset_hash()[..12]).map_err(w)?;
+    writeln!(out, "dataset {} (config {})", dataset.display(), &r.config_hash[..12]).map_err(w)?;
     writeln!(
         out,
         "{} units in {} shards; worker {worker} of {workers}: {} shards already committed, {} committed now{}",

@@ -65,8 +65,8 @@ pub struct EvalInpaintArgs {
     /// At most this many views per sequence (0: no limit).
     #[arg(long, default_value_t = 8)]
     pub max_views: usize,
-    /// Diffusion checkpoint (`pointreggpt train diffusion --export`).
-    #[arg(long, default_value = "models/diffusion-tiny.safetensors")]
+    /// Diffusion checkpoint (`pointreggpt train diffusion --export`); default the built-in tiny denoiser.
+    #[arg(long, default_value = "builtin:models/diffusion-tiny.safetensors")]
     pub diffusion: PathBuf,
     /// DDIM steps of the diffusion fill (at most --start-step + 1).
     #[arg(long, default_value_t = 50)]
@@ -83,14 +83,14 @@ pub struct EvalInpaintArgs {
     /// DDIM eta of the diffusion fill (official 1: fresh noise at every step; 0: deterministic).
     #[arg(long, default_value_t = 1.0)]
     pub eta: f64,
-    /// Correction U-Net checkpoint (tau_m 0.99).
-    #[arg(long, default_value = "models/correction-tiny.safetensors")]
+    /// Correction U-Net checkpoint (tau_m 0.99); default the built-in tiny U-Net.
+    #[arg(long, default_value = "builtin:models/correction-tiny.safetensors")]
     pub correction: PathBuf,
     /// Seed of the diffusion noise.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     /// CSV file to write.
-    #[arg(long)]
+    #[arg(long, value_parser = crate::commands::locations::local_output)]
     pub out: PathBuf,
     /// No progress bar.
     #[arg(long)]
@@ -99,7 +99,8 @@ pub struct EvalInpaintArgs {
     #[arg(long, default_value_t = 1)]
     pub torch_threads: i32,
     /// Evaluate exactly the condition correction and the fill of this build config instead of the built-in
-    /// rows (repeat to compare configs; rows are named by the file stem).
+    /// rows (repeat to compare configs; rows are named by the file stem; its relative paths are relative to
+    /// its folder).
     #[arg(long)]
     pub pipeline: Vec<PathBuf>,
     /// Also write every view (after each correction) to this folder: NNN_condition.npy, NNN_known.npy,
@@ -118,16 +119,16 @@ filters (min-pool and 3x3 median, 0.0375 m) have no tau_m and are reported once.
 )]
 pub struct EvalCorrectionArgs {
     /// Held-out label dataset(s): folders or object-store URLs; repeat to combine.
-    #[arg(long, required = true)]
+    #[arg(long, required = true, value_parser = crate::commands::locations::dataset)]
     pub labels: Vec<PathBuf>,
-    /// U-Net checkpoint with DepthAugment.
-    #[arg(long, default_value = "models/correction-tiny.safetensors")]
+    /// U-Net checkpoint with DepthAugment; default the built-in tiny U-Net.
+    #[arg(long, default_value = "builtin:models/correction-tiny.safetensors")]
     pub checkpoint: PathBuf,
     /// U-Net checkpoint trained without DepthAugment (adds a row).
     #[arg(long)]
     pub checkpoint_noaug: Option<PathBuf>,
     /// CSV file to write.
-    #[arg(long)]
+    #[arg(long, value_parser = crate::commands::locations::local_output)]
     pub out: PathBuf,
     /// cpu, cuda or cuda:N.
     #[arg(long, default_value = "cpu")]
@@ -207,9 +208,8 @@ fn run_inpaint(a: &EvalInpaintArgs, out: &mut dyn Write) -> Result<()> {
         .pipeline
         .iter()
         .map(|p| {
-            let text = std::fs::read_to_string(p).map_err(|e| Error::io(p, e))?;
             let origin = p.display().to_string();
-            let config = crate::pipeline::config::BuildConfig::from_toml(&text, &origin)?;
+            let config: crate::pipeline::BuildConfig = crate::pipeline::load::load_toml(p, &[])?;
             config.correct.validate()?;
             config.inpaint.validate(&format!("{origin}: inpaint"))?;
             let name = p.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or(origin);

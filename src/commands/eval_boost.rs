@@ -114,17 +114,19 @@ pub struct EvalBoostArgs {
     /// The generator whose source-side overlap histogram the real single-frame pairs are matched to.
     #[arg(long, default_value = "classical")]
     pub reference: String,
-    /// The classical generator's pipeline config (its source and frame selection are replaced).
-    #[arg(long, default_value = "pipelines/paper-3dmatch-classical.toml")]
+    /// The classical generator's pipeline config (its source and frame selection are replaced); default
+    /// the shipped pipelines/paper-3dmatch-classical.toml, built into the binary.
+    #[arg(long, default_value = crate::pipeline::load::BUILTIN_CLASSICAL)]
     pub classical_config: PathBuf,
-    /// Folder holding correction-tiny.safetensors and diffusion-tiny-holes.safetensors (neural).
-    #[arg(long, default_value = "models")]
+    /// Folder holding correction-tiny.safetensors and diffusion-tiny-holes.safetensors (neural); default
+    /// the shipped models, built into the binary.
+    #[arg(long, default_value = "builtin:models")]
     pub models: PathBuf,
     /// Seed of the evaluation's point sampling and RANSAC (the same for every condition).
     #[arg(long, default_value_t = 0)]
     pub eval_seed: u64,
     /// Output folder (datasets, checkpoints, scores, tables).
-    #[arg(long)]
+    #[arg(long, value_parser = crate::commands::locations::local_output)]
     pub out: PathBuf,
     /// No progress bars.
     #[arg(long)]

@@ -15,12 +15,13 @@ use std::path::PathBuf;
 The pointreggpt and geotransformer formats take ok rows only; ply writes every matching row.")]
 pub struct ExportArgs {
     /// The dataset: a folder, or an object-store URL (s3://bucket/prefix, gs://bucket/prefix, az://container/prefix).
+    #[arg(value_parser = crate::commands::locations::dataset)]
     pub dataset: PathBuf,
     /// Output layout.
     #[arg(long, value_enum)]
     pub format: Format,
     /// Output folder (must not exist or be empty).
-    #[arg(long)]
+    #[arg(long, value_parser = crate::commands::locations::local_output)]
     pub out: PathBuf,
     /// Only rows where this SQL predicate is true, e.g. "status = 'ok' and overlap_source >= 0.3".
     #[arg(long = "where", value_name = "PREDICATE")]

@@ -57,7 +57,7 @@ pub struct FragmentsArgs {
     #[arg(long, value_delimiter = ',', default_value = "5,10,20,30,40,50,60,70,80,90")]
     pub gaps: Vec<usize>,
     /// Output benchmark folder.
-    #[arg(long)]
+    #[arg(long, value_parser = crate::commands::locations::local_output)]
     pub out: PathBuf,
     /// Stop at the first frame without a camera pose (default: leave such frames out and count them).
     #[arg(long)]

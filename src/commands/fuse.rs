@@ -33,7 +33,7 @@ pub struct FuseArgs {
     pub weight_threshold: f32,
     /// Output folder: fused.cloud.ply (points) and fused.mesh.ply (marching cubes), in the first frame's
     /// camera coordinates.
-    #[arg(long, default_value = "out/fuse")]
+    #[arg(long, default_value = "out/fuse", value_parser = crate::commands::locations::local_output)]
     pub out: PathBuf,
 }
 

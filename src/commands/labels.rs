@@ -12,7 +12,8 @@ use std::path::PathBuf;
 the dense surface P_d and its voxel-downsampled copy P_s are re-projected into sampled poses as I_d and I_s, and \
 labelled M_gt = |I_s - I_d| < tau_gt. Resumable and shardable exactly like `build`.")]
 pub struct LabelsArgs {
-    /// Label pipeline config (TOML), for example pipelines/labels-demo.toml.
+    /// Label pipeline config (TOML), for example pipelines/labels-demo.toml. Relative paths inside it are
+    /// relative to its folder.
     pub config: PathBuf,
     #[command(flatten)]
     pub run: RunArgs,
@@ -32,7 +33,7 @@ pub fn run(args: &LabelsArgs, out: &mut dyn Write) -> Result<()> {
     cancel.cancel_on_signals();
     let r = run_labels(&config, &opts, &cancel)?;
     let by: Vec<String> = r.rows_by_status.iter().map(|(k, v)| format!("{k} {v}")).collect();
-    writeln!(out, "label dataset {} (config {})", dataset.display(), &config.dataset_hash()[..12]).map_err(w)?;
+    writeln!(out, "label dataset {} (config {})", dataset.display(), &r.config_hash[..12]).map_err(w)?;
     writeln!(out, "{} windows in {} shards; worker {worker} of {workers}: {} already committed, {} committed now", r.windows, r.total_shards, r.already_committed, r.committed_now.len()).map_err(w)?;
     writeln!(out, "rows written: {} ({})", r.rows_by_status.values().sum::<u64>(), if by.is_empty() { "none".into() } else { by.join(", ") }).map_err(w)?;
     if r.unposed.frames > 0 {

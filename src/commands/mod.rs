@@ -6,6 +6,7 @@ pub mod fuse;
 pub mod export;
 pub mod inspect;
 pub mod labels;
+pub mod locations;
 pub mod preview;
 pub mod publish;
 pub mod stats;

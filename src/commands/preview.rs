@@ -15,9 +15,10 @@ rendered into the target camera with the stored pose (red = source, green = targ
 and scene like 'scene0%'\".")]
 pub struct PreviewArgs {
     /// The dataset: a folder, or an object-store URL (s3://bucket/prefix, gs://bucket/prefix, az://container/prefix).
+    #[arg(value_parser = crate::commands::locations::dataset)]
     pub dataset: PathBuf,
     /// Output folder (created); files are named <pair key, sanitized>.png.
-    #[arg(long)]
+    #[arg(long, value_parser = crate::commands::locations::local_output)]
     pub out: PathBuf,
     /// Only rows where this SQL predicate is true, e.g. "status = 'ok' and overlap_source < 0.3".
     #[arg(long = "where", value_name = "PREDICATE")]

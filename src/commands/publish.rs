@@ -16,6 +16,7 @@ python3 -c \"import polars as pl; print(pl.read_delta('out/demo').group_by('stat
 python3 -c \"from deltalake import DeltaTable; print(DeltaTable('out/demo').to_pyarrow_table().num_rows)\"")]
 pub struct PublishArgs {
     /// The dataset: a folder or an object-store URL (s3://bucket/prefix, gs://…, az://…).
+    #[arg(value_parser = crate::commands::locations::dataset)]
     pub dataset: PathBuf,
 }
 

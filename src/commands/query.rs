@@ -14,6 +14,7 @@ pointreggpt query out/demo \"select scene, count(*) pairs, avg(array_length(sour
 pointreggpt query out/demo \"select shard, rows, bytes from manifest order by shard\"")]
 pub struct QueryArgs {
     /// The dataset: a folder, or an object-store URL (s3://bucket/prefix, gs://bucket/prefix, az://container/prefix).
+    #[arg(value_parser = crate::commands::locations::dataset)]
     pub dataset: PathBuf,
     /// The SQL statement. Tables: pairs, labels, manifest (committed shards only).
     pub sql: String,
@@ -21,7 +22,7 @@ pub struct QueryArgs {
     #[arg(long, value_enum, default_value = "table")]
     pub format: OutputFormat,
     /// Write to this file instead of standard output (required for parquet).
-    #[arg(long)]
+    #[arg(long, value_parser = crate::commands::locations::local_output)]
     pub output: Option<PathBuf>,
 }
 

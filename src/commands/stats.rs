@@ -13,9 +13,10 @@ use std::path::PathBuf;
 --where \"scene in ('a','b') and array_length(target_points) >= 2000\".")]
 pub struct StatsArgs {
     /// The dataset: a folder, or an object-store URL (s3://bucket/prefix, gs://bucket/prefix, az://container/prefix).
+    #[arg(value_parser = crate::commands::locations::dataset)]
     pub dataset: PathBuf,
     /// Output folder (created) for stats.txt and stats.png.
-    #[arg(long)]
+    #[arg(long, value_parser = crate::commands::locations::local_output)]
     pub out: PathBuf,
     /// Add tables per scene.
     #[arg(long)]

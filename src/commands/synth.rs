@@ -8,7 +8,7 @@ use std::path::PathBuf;
 #[derive(Debug, clap::Args)]
 pub struct SynthArgs {
     /// Output folder; each scene goes to `<out>/synthetic-<seed>/`.
-    #[arg(long)]
+    #[arg(long, value_parser = crate::commands::locations::local_output)]
     pub out: PathBuf,
     /// Number of scenes (seeds `seed`, `seed+1`, ...).
     #[arg(long, default_value_t = 1)]

@@ -35,7 +35,8 @@ shifted), min-SNR, 3000 steps."
 )]
 pub struct TrainDiffusionArgs {
     /// Training frames: a pipeline TOML (its [source], [select] and [working] are used, e.g.
-    /// pipelines/demo.toml) or a folder of depth sequences. Repeat to combine.
+    /// pipelines/demo.toml; its relative paths are relative to its folder) or a folder of depth sequences.
+    /// Repeat to combine.
     #[arg(long, required = true)]
     pub data: Vec<PathBuf>,
     /// Network size.
@@ -94,10 +95,10 @@ pub struct TrainDiffusionArgs {
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     /// Output folder for checkpoints and the loss log.
-    #[arg(long)]
+    #[arg(long, value_parser = crate::commands::locations::local_output)]
     pub out: PathBuf,
     /// Also write the EMA weights alone (what sampling loads; small) to this file at the end.
-    #[arg(long)]
+    #[arg(long, value_parser = crate::commands::locations::local_output)]
     pub export: Option<PathBuf>,
     /// Continue from <out>/latest.safetensors (weights, EMA, Adam moments, step).
     #[arg(long)]
@@ -128,10 +129,10 @@ Defaults per preset: paper = official (lr 4e-5, batch 4, 100 epochs, whole maps,
 pub struct TrainCorrectionArgs {
     /// Training label dataset(s) made by `pointreggpt labels`: folders or object-store URLs (s3://bucket/prefix, …);
     /// repeat to combine.
-    #[arg(long, required = true)]
+    #[arg(long, required = true, value_parser = crate::commands::locations::dataset)]
     pub labels: Vec<PathBuf>,
     /// Validation label dataset(s); without, the last --val-fraction of the training windows is held out.
-    #[arg(long)]
+    #[arg(long, value_parser = crate::commands::locations::dataset)]
     pub val_labels: Vec<PathBuf>,
     /// Fraction of fused windows held out for validation when no --val-labels is given.
     #[arg(long, default_value_t = 0.1)]
@@ -168,7 +169,7 @@ pub struct TrainCorrectionArgs {
     #[arg(long)]
     pub no_augment: bool,
     /// Output folder for checkpoints and the metrics log.
-    #[arg(long)]
+    #[arg(long, value_parser = crate::commands::locations::local_output)]
     pub out: PathBuf,
     /// Continue from <out>/latest.safetensors (weights, epoch and learning rate; Adam's moments restart).
     #[arg(long)]

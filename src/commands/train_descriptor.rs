@@ -25,7 +25,7 @@ pub struct TrainDescriptorArgs {
     /// Pair dataset(s) made by `pointreggpt build` (folders or object-store URLs; only `ok` rows are used), or
     /// benchmark folders of real pairs with captured poses (`pointreggpt fragments --single-frames` of the
     /// training frames; clouds voxelised at 2.5 cm). Repeat to combine.
-    #[arg(long, required = true)]
+    #[arg(long, required = true, value_parser = crate::commands::locations::dataset)]
     pub data: Vec<PathBuf>,
     /// Optimiser steps in total (a resumed run continues up to this count); --epochs sets it from the data.
     #[arg(long, default_value_t = 1500)]
@@ -54,7 +54,7 @@ pub struct TrainDescriptorArgs {
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     /// Output folder for checkpoints and the loss log.
-    #[arg(long)]
+    #[arg(long, value_parser = crate::commands::locations::local_output)]
     pub out: PathBuf,
     /// Continue from <out>/latest.safetensors (weights, Adam moments, step).
     #[arg(long)]

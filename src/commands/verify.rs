@@ -14,6 +14,7 @@ When the dataset has a Delta Lake table (_delta_log/), verify says whether it li
 and --repair publishes the withdrawals as a new table version.")]
 pub struct VerifyArgs {
     /// The dataset: a folder or an object-store URL.
+    #[arg(value_parser = crate::commands::locations::dataset)]
     pub dataset: PathBuf,
     /// Withdraw the manifest entries of shards that fail (the next build run redoes exactly those) and
     /// remove temporary files of dead processes (on an object store: their upload records, incomplete

@@ -18,8 +18,9 @@ pub enum CorrectionConfig {
     Median { window: u32, threshold: f32 },
     /// The trained correction U-Net (reference §4): drop a pixel whose keep probability is at most
     /// `threshold` (τ_m, official 0.99). `checkpoint` is a safetensors file (`pointreggpt train
-    /// correction`, or the authors' converted weights), relative to the working directory; `preset`, when
-    /// given, must match the checkpoint's.
+    /// correction`, or the authors' converted weights; in a config file relative to the file's folder) or
+    /// a built-in model (`builtin:models/correction-tiny.safetensors`); `preset`, when given, must match
+    /// the checkpoint's.
     Unet {
         checkpoint: crate::nn::ModelPath,
         threshold: f32,
@@ -37,6 +38,13 @@ impl CorrectionConfig {
         match self {
             CorrectionConfig::Unet { checkpoint, .. } => Some(*checkpoint),
             _ => None,
+        }
+    }
+
+    /// Calls `visit` on the checkpoint path, if any, as `<field>.checkpoint`.
+    pub fn for_each_path(&mut self, field: &str, visit: &mut dyn FnMut(&str, &mut std::path::PathBuf)) {
+        if let CorrectionConfig::Unet { checkpoint, .. } = self {
+            crate::config_paths::visit_model(visit, &format!("{field}.checkpoint"), checkpoint);
         }
     }
 

@@ -70,7 +70,7 @@ impl X0Model for TorchScriptModel {
 /// Whether `path` is a TorchScript archive (a zip file) rather than safetensors.
 pub fn is_torchscript(path: &Path) -> Result<bool> {
     use std::io::Read;
-    let mut f = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let (mut f, _) = crate::nn::shipped::open_model(path)?;
     let mut magic = [0u8; 4];
     Ok(f.read_exact(&mut magic).is_ok() && magic == *b"PK\x03\x04")
 }

@@ -35,6 +35,13 @@ impl InpaintConfig {
         }
     }
 
+    /// Calls `visit` on the checkpoint path, if any, as `<field>.checkpoint`.
+    pub fn for_each_path(&mut self, field: &str, visit: &mut dyn FnMut(&str, &mut std::path::PathBuf)) {
+        if let InpaintConfig::Diffusion(c) = self {
+            crate::config_paths::visit_model(visit, &format!("{field}.checkpoint"), &mut c.checkpoint);
+        }
+    }
+
     /// The model file this method reads, if any.
     pub fn checkpoint(&self) -> Option<crate::nn::ModelPath> {
         match self {

@@ -19,8 +19,8 @@ use tch::{nn, Device};
 #[serde(deny_unknown_fields)]
 pub struct DiffusionInpaintConfig {
     /// Denoiser checkpoint (`pointreggpt train diffusion`, or the authors' weights converted to
-    /// safetensors) or a TorchScript denoiser `forward(x, t, intrinsics) → x0`, relative to the working
-    /// directory.
+    /// safetensors) or a TorchScript denoiser `forward(x, t, intrinsics) → x0` (in a config file relative
+    /// to the file's folder), or a built-in model (`builtin:models/diffusion-tiny-holes.safetensors`).
     pub checkpoint: ModelPath,
     /// DDIM steps (paper 250); with `start = "push_pull"` at most `start_step + 1`.
     pub steps: usize,

@@ -1,11 +1,13 @@
 //! The label pipeline's configuration.
 
+use crate::config_paths::{identity_toml, ConfigIdentity, ConfigPaths};
 use crate::error::{Error, Result};
 use crate::sources::SourceConfig;
 use crate::stages::ingest::WorkingConfig;
 use crate::stages::pose::PoseConfig;
 use crate::tsdf::TsdfConfig;
 use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
 
 /// The whole label pipeline.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -41,6 +43,9 @@ pub struct LabelsConfig {
     /// τ_gt, metres (official 0.05).
     #[serde(default = "default_tau")]
     pub tau_gt: f32,
+    /// The folder of the config file its relative paths were resolved against (not a key).
+    #[serde(skip)]
+    pub folder: Option<PathBuf>,
 }
 
 fn two() -> u32 {
@@ -119,15 +124,11 @@ impl LabelsConfig {
     pub fn to_toml(&self) -> String {
         toml::to_string(self).expect("the config serialises")
     }
-    /// blake3 of the content-determining config (without `shard_size`), hex.
-    pub fn content_hash(&self) -> String {
-        let mut c = self.clone();
-        c.shard_size = 0;
-        blake3::hash(c.to_toml().as_bytes()).to_hex().to_string()
-    }
-    /// blake3 of the whole resolved config, hex.
-    pub fn dataset_hash(&self) -> String {
-        blake3::hash(self.to_toml().as_bytes()).to_hex().to_string()
+    /// The config's identity (paths as the config file wrote them): the text the dataset records, its hash
+    /// and the hash of the content-determining part (without `shard_size`).
+    pub fn identity(&self) -> Result<ConfigIdentity> {
+        let content = LabelsConfig { shard_size: 0, ..self.clone() };
+        Ok(ConfigIdentity::new(identity_toml(self)?, &identity_toml(&content)?))
     }
 
     /// Checks ranges before any work starts, naming the key.
@@ -159,5 +160,23 @@ impl LabelsConfig {
         self.source.validate()?;
         self.working.validate()?;
         self.pose.validate()
+    }
+}
+
+impl ConfigPaths for LabelsConfig {
+    fn for_each_path(&mut self, visit: &mut dyn FnMut(&str, &mut PathBuf)) {
+        self.source.for_each_path(visit);
+    }
+
+    fn checkpoints(&self) -> Vec<(&'static str, crate::nn::ModelPath)> {
+        Vec::new()
+    }
+
+    fn folder(&self) -> Option<&Path> {
+        self.folder.as_deref()
+    }
+
+    fn set_folder(&mut self, folder: PathBuf) {
+        self.folder = Some(folder);
     }
 }

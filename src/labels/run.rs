@@ -19,6 +19,8 @@ use std::sync::Arc;
 #[derive(Clone, Debug)]
 pub struct LabelsReport {
     pub dataset: PathBuf,
+    /// The dataset's config hash (the blake3 of [`LabelsConfig::identity`]).
+    pub config_hash: String,
     pub windows: u64,
     pub total_shards: u64,
     pub already_committed: u64,
@@ -37,7 +39,8 @@ pub fn run_labels(config: &LabelsConfig, opts: &BuildOptions, cancel: &CancelTok
     let catalog = Arc::new(catalog);
     let total = windows.len() as u64;
     let total_shards = shard_count(config.shard_size, total);
-    let dataset = Dataset::create_or_open(&opts.out, &config.to_toml(), &config.dataset_hash())?
+    let identity = config.identity()?;
+    let dataset = Dataset::create_or_open(&opts.out, &identity.toml, &identity.dataset_hash)?
         .with_worker(format!("{}-of-{}", opts.worker, opts.workers));
     dataset.clean_stale_temps()?;
     let committed = dataset.resumable(LABELS_TABLE)?;
@@ -68,7 +71,7 @@ pub fn run_labels(config: &LabelsConfig, opts: &BuildOptions, cancel: &CancelTok
         StageSpec::replicated(n, || Fuse { catalog: catalog.clone(), config: config.clone(), strict: opts.strict }),
         StageSpec::replicated(n, || SampleAndLabel {
             config: config.clone(),
-            config_hash: config.content_hash(),
+            config_hash: identity.content_hash.clone(),
             code_version: CODE_VERSION.to_string(),
             stages_json: stages_json.clone(),
         }),
@@ -77,6 +80,7 @@ pub fn run_labels(config: &LabelsConfig, opts: &BuildOptions, cancel: &CancelTok
     let summary = run_pipeline(units, stages, &mut sink, todo_units, opts.progress, cancel)?;
     Ok(LabelsReport {
         dataset: opts.out.clone(),
+        config_hash: identity.dataset_hash.clone(),
         windows: total,
         total_shards,
         already_committed: (owned.len() - sink.shards.len()) as u64,

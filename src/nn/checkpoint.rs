@@ -136,8 +136,7 @@ pub fn write_safetensors(path: &Path, tensors: &[(String, Tensor)], metadata: &B
 /// and the JSON header, parsed by the crate; the tensors must tile the rest of the file exactly (as the
 /// crate checks when it has the whole file), so a truncated file is caught here too.
 fn read_metadata(path: &Path) -> Result<Metadata> {
-    let mut f = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
-    let file_len = f.metadata().map_err(|e| Error::io(path, e))?.len();
+    let (mut f, file_len) = super::shipped::open_model(path)?;
     let mut n = [0u8; 8];
     f.read_exact(&mut n).map_err(|_| invalid(path, describe(&SafeTensorError::HeaderTooSmall)))?;
     let n = u64::from_le_bytes(n);
@@ -176,7 +175,7 @@ pub fn read_header(path: &Path) -> Result<(BTreeMap<String, String>, BTreeMap<St
 
 /// Every tensor of a safetensors file, in the file's dtype, read through the crate.
 pub fn read_tensors(path: &Path) -> Result<Vec<(String, Tensor)>> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bytes = super::shipped::read_model(path)?;
     let file = SafeTensors::deserialize(&bytes).map_err(|e| invalid(path, describe(&e)))?;
     file.tensors()
         .into_iter()

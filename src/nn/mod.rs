@@ -12,7 +12,7 @@
 //!   distance-field patches) and [`fpfh_mlp`] (an MLP on multi-scale FPFH);
 //! - [`space`]: metric depth ↔ network values (`z/10`, `2·z/10 − 1`), the one place for those formulas;
 //! - I/O: [`checkpoint`] (safetensors with the config in the header metadata; the authors' key layout),
-//!   [`model_path`].
+//!   [`model_path`], [`shipped`] (the default checkpoints built into the binary, `builtin:models/…`).
 //!
 //! Variable names follow the authors' PyTorch state-dict keys (`init_conv.weight`,
 //! `downs.0.0.block1.proj.weight`, ..., `final_conv.0.weight`), so a converted `model-best.pt` loads
@@ -29,6 +29,7 @@ pub mod model_path;
 pub mod norm;
 pub mod patch_net;
 pub mod resnet;
+pub mod shipped;
 pub mod space;
 pub mod unet;
 pub mod ws_conv;

@@ -1,4 +1,5 @@
-//! `ModelPath`: a `Copy` file path for configs that must stay `Copy` (the pipeline's correction configs).
+//! `ModelPath`: a `Copy` file path for configs that must stay `Copy` (the pipeline's correction configs):
+//! a checkpoint file, or a built-in model named `builtin:models/<file>` ([`super::shipped`]).
 
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 use std::collections::HashSet;
@@ -30,6 +31,16 @@ impl ModelPath {
 
     pub fn as_str(&self) -> &'static str {
         self.0
+    }
+
+    /// Whether this names a built-in model rather than a file.
+    pub fn is_builtin(&self) -> bool {
+        super::shipped::is_builtin(self.as_path())
+    }
+
+    /// blake3 of the model's bytes, hex: what identifies a checkpoint wherever its file lies.
+    pub fn blake3(&self) -> crate::Result<String> {
+        Ok(blake3::hash(&super::shipped::read_model(self.as_path())?).to_hex().to_string())
     }
 }
 

@@ -38,6 +38,8 @@ pub struct BuildOptions {
 #[derive(Clone, Debug)]
 pub struct BuildReport {
     pub dataset: PathBuf,
+    /// The dataset's config hash (the blake3 of the config's identity, [`BuildConfig::identity`]).
+    pub config_hash: String,
     pub total_units: u64,
     pub total_shards: u64,
     /// Shards this worker owns that were already committed (skipped).
@@ -56,7 +58,8 @@ pub fn run_build(config: &BuildConfig, opts: &BuildOptions, cancel: &CancelToken
     let catalog = Arc::new(Catalog::open(&config.source, &config.select, config.samples_per_frame)?);
     let total_units = catalog.units();
     let total_shards = shard_count(config.shard_size, total_units);
-    let dataset = Dataset::create_or_open(&opts.out, &config.to_toml(), &config.dataset_hash())?
+    let identity = config.identity()?;
+    let dataset = Dataset::create_or_open(&opts.out, &identity.toml, &identity.dataset_hash)?
         .with_worker(format!("{}-of-{}", opts.worker, opts.workers));
     dataset.clean_stale_temps()?;
     let committed = dataset.resumable("pairs")?;
@@ -75,11 +78,12 @@ pub fn run_build(config: &BuildConfig, opts: &BuildOptions, cancel: &CancelToken
             PairUnit::new(u, fi, si, unit_seed(seed, &f.key, si as u64), f.scene.clone(), f.key.clone())
         })
     };
-    let stages = build_stages(config, catalog, opts.strict, rayon::current_num_threads())?;
+    let stages = build_stages(config, &identity.content_hash, catalog, opts.strict, rayon::current_num_threads())?;
     let mut sink = ShardSink::new(&dataset, config.shard_size, total_units, todo);
     let summary = run_pipeline(units, stages, &mut sink, todo_units, opts.progress, cancel)?;
     Ok(BuildReport {
         dataset: opts.out.clone(),
+        config_hash: identity.dataset_hash,
         total_units,
         total_shards,
         already_committed: (owned.len() - sink.shards.len()) as u64,
@@ -92,7 +96,7 @@ pub fn run_build(config: &BuildConfig, opts: &BuildOptions, cancel: &CancelToken
 /// The stages of the build pipeline, in order, each replicated over `threads` workers (a unit's work
 /// is a few milliseconds, so parallelism across units is what fills the cores; the sink restores unit
 /// order within each shard).
-fn build_stages(config: &BuildConfig, catalog: Arc<Catalog>, strict: bool, threads: usize) -> Result<Vec<StageSpec<PairUnit>>> {
+fn build_stages(config: &BuildConfig, content_hash: &str, catalog: Arc<Catalog>, strict: bool, threads: usize) -> Result<Vec<StageSpec<PairUnit>>> {
     let w = &config.working;
     let n = threads;
     let mut inpainters = (0..n).map(|_| config.inpaint.build()).collect::<Result<Vec<_>>>()?.into_iter();
@@ -128,7 +132,7 @@ fn build_stages(config: &BuildConfig, catalog: Arc<Catalog>, strict: bool, threa
         StageSpec::replicated(n, || config.voxelize.build(w)),
         StageSpec::replicated(n, || config.validate.build()),
         StageSpec::replicated(n, || Pack {
-            config_hash: config.content_hash(),
+            config_hash: content_hash.to_string(),
             code_version: CODE_VERSION.to_string(),
             stages_json: stages_json(config),
             depth_maps: config.output.depth_maps,
@@ -138,16 +142,20 @@ fn build_stages(config: &BuildConfig, catalog: Arc<Catalog>, strict: bool, threa
     Ok(stages)
 }
 
-/// The provenance record of the stages: names and parameters (and model hashes when models exist).
-fn stages_json(config: &BuildConfig) -> String {
+/// The provenance record of the stages: names and parameters (and model hashes when models exist), with
+/// paths as the config file wrote them (the same rows wherever the build ran).
+fn stages_json(resolved: &BuildConfig) -> String {
+    let config = &crate::config_paths::relative_to_folder(resolved);
+    let (c, i, o) = (&resolved.correct.condition, &resolved.inpaint, &resolved.correct.output);
+    let (condition_model, inpaint_model, output_model) = (model_hash(c.checkpoint()), model_hash(i.checkpoint()), model_hash(o.checkpoint()));
     let successive = (!config.successive.is_off()).then(|| serde_json::json!({"stage": "successive", "params": config.successive}));
     let v: Vec<serde_json::Value> = [
         serde_json::json!({"stage": "ingest", "select": config.select, "working": config.working}),
         serde_json::json!({"stage": "pose", "sampler": "pivot", "params": config.pose}),
         serde_json::json!({"stage": "reproject", "zbuffer": "nearest", "rounding": "half_even"}),
-        serde_json::json!({"stage": "correct_condition", "params": config.correct.condition, "model_blake3": model_hash(config.correct.condition.checkpoint())}),
-        serde_json::json!({"stage": "inpaint", "params": config.inpaint, "model_blake3": model_hash(config.inpaint.checkpoint())}),
-        serde_json::json!({"stage": "correct_output", "params": config.correct.output, "model_blake3": model_hash(config.correct.output.checkpoint())}),
+        serde_json::json!({"stage": "correct_condition", "params": config.correct.condition, "model_blake3": condition_model}),
+        serde_json::json!({"stage": "inpaint", "params": config.inpaint, "model_blake3": inpaint_model}),
+        serde_json::json!({"stage": "correct_output", "params": config.correct.output, "model_blake3": output_model}),
     ]
     .into_iter()
     .chain(successive)
@@ -159,7 +167,7 @@ fn stages_json(config: &BuildConfig) -> String {
     serde_json::Value::Array(v).to_string()
 }
 
-/// blake3 of a stage's model file (None without a model; the file was read by validation before).
+/// blake3 of a stage's model (None without a model; the file was read by validation before).
 fn model_hash(path: Option<crate::nn::ModelPath>) -> Option<String> {
-    path.and_then(|p| std::fs::read(p.as_path()).ok()).map(|bytes| blake3::hash(&bytes).to_hex().to_string())
+    path.and_then(|p| p.blake3().ok())
 }

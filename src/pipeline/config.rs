@@ -6,9 +6,12 @@
 //! (the official settings, reference §2–§6) and checks.
 //!
 //! Unknown keys are rejected. [`BuildConfig::validate`] checks every section and names the offending key.
+//! Relative paths resolve against the config file's folder ([`crate::config_paths`]).
 
+use crate::config_paths::{identity_toml, ConfigIdentity, ConfigPaths};
 use crate::error::{Error, Result};
 use crate::inpainting::InpaintConfig;
+use crate::nn::ModelPath;
 use crate::sources::{SelectConfig, SourceConfig};
 use crate::stages::correct::CorrectConfig;
 use crate::stages::ingest::WorkingConfig;
@@ -18,6 +21,7 @@ use crate::stages::successive::SuccessiveConfig;
 use crate::stages::validate::ValidateConfig;
 use crate::stages::voxelize::VoxelizeConfig;
 use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
 
 /// The whole build pipeline.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -62,6 +66,10 @@ pub struct BuildConfig {
     /// What each row stores besides the clouds.
     #[serde(default)]
     pub output: OutputConfig,
+    /// The folder of the config file its relative paths were resolved against (not a key: `None` for a
+    /// config made in code, whose relative paths are relative to the working directory).
+    #[serde(skip)]
+    pub folder: Option<PathBuf>,
 }
 
 fn one() -> u32 {
@@ -116,17 +124,13 @@ impl BuildConfig {
         toml::to_string(self).expect("the config serialises")
     }
 
-    /// blake3 of everything that determines a row's content (the canonical TOML without `shard_size`),
-    /// hex. The shard size changes which file a row lands in, not the row.
-    pub fn content_hash(&self) -> String {
-        let mut c = self.clone();
-        c.shard_size = 0;
-        blake3::hash(c.to_toml().as_bytes()).to_hex().to_string()
-    }
-
-    /// blake3 of the whole resolved config (the dataset's identity: a resume must match it), hex.
-    pub fn dataset_hash(&self) -> String {
-        blake3::hash(self.to_toml().as_bytes()).to_hex().to_string()
+    /// The config's identity ([`crate::config_paths::identity_toml`]: paths as the config file wrote
+    /// them, checkpoints by content): the text the dataset records, its hash (a resume must match it) and
+    /// the hash of everything that determines a row's content (without `shard_size`, which changes which
+    /// file a row lands in, not the row). Reads the checkpoints.
+    pub fn identity(&self) -> Result<ConfigIdentity> {
+        let content = BuildConfig { shard_size: 0, ..self.clone() };
+        Ok(ConfigIdentity::new(identity_toml(self)?, &identity_toml(&content)?))
     }
 
     /// Checks every range before any work starts (and that model checkpoints load); the error names the key.
@@ -146,6 +150,31 @@ impl BuildConfig {
         self.successive.validate()?;
         self.voxelize.validate()?;
         self.validate.validate()
+    }
+}
+
+impl ConfigPaths for BuildConfig {
+    fn for_each_path(&mut self, visit: &mut dyn FnMut(&str, &mut PathBuf)) {
+        self.source.for_each_path(visit);
+        self.correct.condition.for_each_path("correct.condition", visit);
+        self.inpaint.for_each_path("inpaint", visit);
+        self.correct.output.for_each_path("correct.output", visit);
+    }
+
+    fn checkpoints(&self) -> Vec<(&'static str, ModelPath)> {
+        let c = &self.correct;
+        [("correct.condition.checkpoint", c.condition.checkpoint()), ("inpaint.checkpoint", self.inpaint.checkpoint()), ("correct.output.checkpoint", c.output.checkpoint())]
+            .into_iter()
+            .filter_map(|(k, m)| m.map(|m| (k, m)))
+            .collect()
+    }
+
+    fn folder(&self) -> Option<&Path> {
+        self.folder.as_deref()
+    }
+
+    fn set_folder(&mut self, folder: PathBuf) {
+        self.folder = Some(folder);
     }
 }
 
@@ -199,7 +228,7 @@ mod tests {
         assert!(!c.to_toml().contains("successive"));
         let s = BuildConfig::from_toml(&format!("{MINIMAL}[successive]\nviews = 3\n"), "t").unwrap();
         assert!(s.to_toml().contains("[successive]"));
-        assert_ne!(c.content_hash(), s.content_hash());
+        assert_ne!(c.identity().unwrap().content_hash, s.identity().unwrap().content_hash);
     }
 
     #[test]
@@ -209,10 +238,13 @@ mod tests {
         assert_eq!(back, c);
         let mut d = c.clone();
         d.shard_size = 7;
-        assert_eq!(c.content_hash(), d.content_hash());
-        assert_ne!(c.dataset_hash(), d.dataset_hash());
+        let (ic, id) = (c.identity().unwrap(), d.identity().unwrap());
+        assert_eq!(ic.content_hash, id.content_hash);
+        assert_ne!(ic.dataset_hash, id.dataset_hash);
+        // Without paths and checkpoints the identity is the canonical TOML (hashes of older datasets hold).
+        assert_eq!(ic.toml, c.to_toml());
         d.seed = 1;
-        assert_ne!(c.content_hash(), d.content_hash());
+        assert_ne!(ic.content_hash, d.identity().unwrap().content_hash);
     }
 }
 

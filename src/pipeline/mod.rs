@@ -3,6 +3,7 @@
 
 pub mod build;
 pub mod config;
+pub mod load;
 pub mod overrides;
 
 pub use build::{run_build, BuildOptions, BuildReport};

@@ -29,7 +29,7 @@ pub enum SourceConfig {
     },
     /// Depth sequences on disk.
     Directory {
-        /// Folder holding the sequences (relative paths are relative to the working directory).
+        /// Folder holding the sequences (a relative path in a config file is relative to the file's folder).
         path: PathBuf,
         /// Folder layout; `auto` decides from marker files (`3dmatch`, `tum`, `scannet`); `folder` is a
         /// plain folder of depth PNGs and needs `intrinsics` and `depth_scale`.
@@ -62,9 +62,17 @@ impl SourceConfig {
             }
         }
     }
-}
 
-impl SourceConfig {
+    /// Calls `visit` on each path of the section, with its key (see [`crate::config_paths`]).
+    pub fn for_each_path(&mut self, visit: &mut dyn FnMut(&str, &mut PathBuf)) {
+        if let SourceConfig::Directory { path, poses, .. } = self {
+            visit("source.path", path);
+            if let Some(p) = poses {
+                visit("source.poses", p);
+            }
+        }
+    }
+
     /// Checks ranges before any work starts; errors name the key under `source`.
     pub fn validate(&self) -> Result<()> {
         let bad = |k: &str, m: &str| Err(Error::config(k, m));

@@ -9,6 +9,7 @@
 
 pub mod aws_profile;
 pub mod local;
+pub mod location;
 pub mod object;
 pub mod object_commit;
 pub mod upload;
@@ -123,49 +124,21 @@ pub struct QueryTarget {
 }
 
 /// Opens the store of a dataset location: a folder path, `file://` URL, or an object-store URL
-/// (`s3://bucket/prefix`, `gs://…`, `az://…`). An unknown scheme is refused naming the URL.
+/// (`s3://bucket/prefix`, `gs://…`, `az://…`); text that looks like a URL but is not a supported one is
+/// refused ([`location::classify`]).
 pub fn open_store(location: &Path) -> Result<Arc<dyn DatasetStore>> {
-    match url_of(location) {
-        None => Ok(Arc::new(local::LocalStore::new(location.to_path_buf()))),
-        Some(text) => {
-            let url = url::Url::parse(&text)
-                .map_err(|e| Error::config("dataset", format!("{text}: not a valid URL ({e})")))?;
-            if url.scheme() == "file" {
-                let path = url.to_file_path().map_err(|_| Error::config("dataset", format!("{text}: not a local file URL")))?;
-                return Ok(Arc::new(local::LocalStore::new(path)));
-            }
+    match location::classify(location)? {
+        location::Location::Local(path) => Ok(Arc::new(local::LocalStore::new(path))),
+        location::Location::Remote(text) => {
+            let url = url::Url::parse(&text).map_err(|e| Error::config("dataset", format!("{text}: not a valid URL ({e})")))?;
             Ok(Arc::new(object::ObjectDatasetStore::open(&text, &url)?))
         }
     }
 }
 
-/// The location as URL text when it looks like one (`<scheme>://…`), else `None` (a path).
-pub fn url_of(location: &Path) -> Option<String> {
-    let text = location.to_str()?;
-    let (scheme, rest) = text.split_once("://")?;
-    let scheme_ok = scheme.len() > 1
-        && scheme.starts_with(|c: char| c.is_ascii_alphabetic())
-        && scheme.chars().all(|c| c.is_ascii_alphanumeric() || matches!(c, '+' | '-' | '.'));
-    (scheme_ok && !rest.is_empty()).then(|| text.to_string())
-}
-
-/// Whether `location` names an object store rather than a local folder.
-pub fn is_remote(location: &Path) -> bool {
-    url_of(location).is_some_and(|u| !u.starts_with("file://"))
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn paths_and_urls_are_told_apart() {
-        assert_eq!(url_of(Path::new("out/demo")), None);
-        assert_eq!(url_of(Path::new("/data/x://y")), None, "a path with :// inside is a path");
-        assert_eq!(url_of(Path::new("s3://bucket/prefix")).as_deref(), Some("s3://bucket/prefix"));
-        assert!(is_remote(Path::new("gs://b/p")) && !is_remote(Path::new("file:///tmp/x")));
-        assert!(url_of(Path::new("s3://")).is_none());
-    }
 
     #[test]
     fn unknown_schemes_are_refused_naming_the_url() {

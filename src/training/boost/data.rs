@@ -155,9 +155,11 @@ pub fn generator_config(
     for (k, v) in sets {
         apply_override(&mut doc, &format!("{k}={v}"))?;
     }
-    let config: BuildConfig = toml::Value::Table(doc)
+    let mut config: BuildConfig = toml::Value::Table(doc)
         .try_into()
         .map_err(|e: toml::de::Error| Error::config(format!("eval boost: the {} generator's config", generator.name()), e.to_string()))?;
+    // Paths kept from the classical config were resolved against its folder: identify them by it.
+    config.folder = classical.folder.clone();
     config.validate()?;
     Ok(config)
 }

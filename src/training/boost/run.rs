@@ -91,7 +91,8 @@ fn training_settings(cfg: &BoostConfig) -> serde_json::Value {
         // Only when given, so the runs made before these options existed still resume.
         "open": (cfg.open != OpenOptions::default()).then(|| format!("{:?}", cfg.open)),
         "train": train,
-        "classical": cfg.classical,
+        // Its paths as its file wrote them: the same settings wherever the run starts.
+        "classical": crate::config_paths::relative_to_folder(&cfg.classical),
         "models": canonical(&cfg.models),
     })
 }

@@ -42,8 +42,8 @@ pub fn data_config(input: &Path) -> Result<BuildConfig> {
         let text = format!("[source]\nkind = \"directory\"\npath = {:?}\n", input.display().to_string());
         BuildConfig::from_toml(&text, &input.display().to_string())
     } else {
-        let text = std::fs::read_to_string(input).map_err(|e| Error::io(input, e))?;
-        BuildConfig::from_toml(&text, &input.display().to_string())
+        // Its relative paths are relative to its folder.
+        crate::pipeline::load::load_toml(input, &[])
     }
 }
 
