@@ -406,6 +406,16 @@ def fetch_folder(folder, entries, sources, dest, mirror, log):
     return len(todo)
 
 
+def remove_stale_downloads(tmp_dir, age_s=3600):
+    """Temporary files an interrupted run left (never used: only verified files are renamed into place);
+    recent ones may belong to a run going on beside this one."""
+    if os.path.isdir(tmp_dir):
+        for name in os.listdir(tmp_dir):
+            path = os.path.join(tmp_dir, name)
+            if time.time() - os.path.getmtime(path) > age_s:
+                os.unlink(path)
+
+
 def default_dest():
     cache = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
     return os.path.join(cache, "pointreggpt", "realdata")
@@ -427,9 +437,16 @@ def main(argv=None):
                 raise FetchError(f"no folder '{name}' in {a.manifest} (it has {', '.join(folders)})")
         dest = os.path.abspath(a.dest)
         os.makedirs(dest, exist_ok=True)
+        remove_stale_downloads(os.path.join(dest, ".fetch", "tmp"))
+        failed = []
         for folder in a.only or folders:
-            fetch_folder(folder, [e for e in entries if e.folder == folder], sources, dest, a.mirror,
-                         lambda m: print(m, file=sys.stderr))
+            try:
+                fetch_folder(folder, [e for e in entries if e.folder == folder], sources, dest, a.mirror,
+                             lambda m: print(m, file=sys.stderr))
+            except FetchError as err:
+                failed.append(str(err))
+        if failed:
+            raise FetchError("\n".join(failed))
     except FetchError as err:
         print(f"fetch-realdata: error: {err}", file=sys.stderr)
         print("fetch-realdata: nothing unverified was kept; rerun to resume (verified files stay)", file=sys.stderr)
