@@ -4,11 +4,12 @@
 # Idempotent: does nothing when the peers already import. Installs only what
 # benchmarks/requirements.txt lists (numpy, scipy, pykdtree, numba, open3d, opencv-python-headless, with their own
 # dependencies) plus Debian's libusb-1.0-0, which some open3d builds load at import.
-# PYTHON selects the interpreter (default python3).
+# They go into the project's own virtual environment: PYTHON (the Makefile sets it to .venv/bin/python),
+# else the one scripts/python-env.sh makes; never into the system's interpreter.
 set -euo pipefail
 
 cd "$(dirname "$0")/.."
-PYTHON="${PYTHON:-python3}"
+PYTHON="${PYTHON:-$(./scripts/python-env.sh)}"
 REQUIREMENTS="benchmarks/requirements.txt"
 CHECK='import numpy, scipy, pykdtree, numba, open3d, cv2'
 VERSIONS='print("numpy", numpy.__version__, "numba", numba.__version__, "open3d", open3d.__version__)'
@@ -29,7 +30,7 @@ install_libusb() {
         return 0
     fi
     if ! command -v apt-get >/dev/null 2>&1 || [[ $(id -u) -ne 0 ]]; then
-        echo "install-bench-peers: warning: cannot install libusb-1.0-0 (needs root and apt-get); open3d may fail to import" >&2
+        echo "install-bench-peers: warning: not installing libusb-1.0-0 (needs root and apt-get): open3d may fail to import until you run, as root, \`apt-get install libusb-1.0-0\`" >&2
         return 0
     fi
     echo "install-bench-peers: apt-get install libusb-1.0-0"

@@ -19,11 +19,14 @@
 #
 # Idempotent: installs nothing that is already there (Python modules that import, Debian packages that
 # are installed, azurite at the pinned version).
-# PYTHON selects the interpreter (default python3).
+# The Python packages go into the project's own virtual environment: PYTHON (the Makefile sets it to
+# .venv/bin/python), else the one scripts/python-env.sh makes; never into the system's interpreter.
+# Without root, the Debian packages are not installed: the script says which `apt-get install` to run.
 set -euo pipefail
 
-PYTHON="${PYTHON:-python3}"
 ROOT="$(cd "$(dirname "$0")/.." && pwd)"
+PYTHON="${PYTHON:-$("$ROOT/scripts/python-env.sh")}"
+export PYTHON
 PYARROW_VERSION="26.0.1"
 DUCKDB_VERSION="2.0.0"
 MOTO_VERSION="5.2.1"
@@ -56,7 +59,7 @@ apt_install() {
     done
     [[ ${#missing[@]} -eq 0 ]] && return 0
     if ! command -v apt-get >/dev/null 2>&1 || [[ $(id -u) -ne 0 ]]; then
-        echo "install-test-deps: warning: cannot install ${missing[*]} (needs root and apt-get); $why" >&2
+        echo "install-test-deps: warning: not installing ${missing[*]} (needs root and apt-get): $why until you run, as root, \`apt-get install ${missing[*]}\`" >&2
         return 0
     fi
     echo "install-test-deps: apt-get install ${missing[*]}"
@@ -86,7 +89,7 @@ install_azurite() {
 
 system_deps() {
     apt_install "open3d may fail to import" libusb-1.0-0
-    apt_install "tests/slurm.rs cannot start a Slurm cluster" slurm-wlm munge
+    apt_install "tests/slurm.rs fails" slurm-wlm munge
     install_azurite
 }
 

@@ -52,15 +52,19 @@ fn have(program: &str) -> bool {
 impl Cluster {
     fn start() -> Cluster {
         let t0 = Instant::now();
+        for p in ["munged", "mungekey", "slurmctld", "slurmd", "sbatch", "scancel", "scontrol", "sinfo", "squeue"] {
+            assert!(
+                have(p),
+                "`{p}` is not installed: as root, run `apt-get install slurm-wlm munge` (Debian's Slurm and MUNGE; \
+                 scripts/install-test-deps.sh does it when run as root)"
+            );
+        }
         let uid = Command::new("id")
             .arg("-u")
             .output()
             .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string())
             .unwrap_or_default();
         assert_eq!(uid, "0", "the Slurm test runs the daemons as root (SlurmUser=root), as CI does");
-        for p in ["munged", "mungekey", "slurmctld", "slurmd", "sbatch", "scancel", "scontrol", "sinfo", "squeue"] {
-            assert!(have(p), "`{p}` is not installed: run scripts/install-test-deps.sh (Debian's slurm-wlm and munge)");
-        }
         let dir = tempfile::tempdir().unwrap();
         let d = dir.path().to_path_buf();
         // munged wants every folder above its socket to be searchable by all.

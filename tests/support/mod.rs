@@ -6,8 +6,8 @@ pub mod store;
 
 use std::path::PathBuf;
 
-/// The real-data folder from `POINTREGGPT_REAL_DATA` (`make test` and `.ci/run` set it to
-/// `../shared/realdata`). A test that needs it fails when it is missing, so a run without the data
+/// The real-data folder from `POINTREGGPT_REAL_DATA` (`make test` sets it to `../shared/realdata` when
+/// that is there, as on CI, else to the cache that `make real-data` fetches the frames into). A test that needs it fails when it is missing, so a run without the data
 /// cannot pass silently; `POINTREGGPT_SKIP_REAL_DATA=1` is the explicit opt-out for a machine that
 /// has no copy (refused when `CI` is set). A skipped test returns `None` and still shows as `ok` in
 /// cargo's list (stable Rust cannot mark a test ignored at run time), so the skip is made visible
@@ -25,7 +25,8 @@ pub fn real_data() -> Option<PathBuf> {
             None
         }
         None => panic!(
-            "POINTREGGPT_REAL_DATA is not set: point it at ../shared/realdata (make test does this when the folder exists), \
+            "POINTREGGPT_REAL_DATA is not set: run the tests with `make test` (it uses ../shared/realdata when present, \
+             else fetches the frames from their public sources: `make real-data`), or point it at a copy, \
              or set POINTREGGPT_SKIP_REAL_DATA=1 to skip the real-data tests on a machine without the data"
         ),
     }
