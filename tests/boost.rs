@@ -305,6 +305,16 @@ fn the_fragment_regime_runs_end_to_end() {
     for want in ["3DMatch, 200 samples", "single-frame, 200 samples", "frag+nofill:2 - frag", "frag+single:2 - frag", "frag - fpfh"] {
         assert!(table.contains(want), "{want} missing from\n{table}");
     }
+    // --by-scene: the same units, tables per benchmark and scene (the fragments' scene is synthetic-200,
+    // the single frames' synthetic-200-frames); nothing is retrained or rescored.
+    let by_scene = run_ok(&[&args[..], &["--by-scene"]].concat());
+    assert!(by_scene.contains("0 units scored (0 of them trained first), 6 already done"), "{by_scene}");
+    let scene_table = std::fs::read_to_string(out.join("boost.txt")).unwrap();
+    for want in ["3DMatch synthetic-200, 200 samples", "single-frame synthetic-200-frames, 200 samples"] {
+        assert!(scene_table.contains(want), "{want} missing from\n{scene_table}");
+    }
+    assert!(!scene_table.contains("3DMatch, 200 samples"), "{scene_table}");
+    run_ok(&args); // back to the pooled tables for the checks below
     let listing = |unit: &str| read_tsv(&out.join(unit).join("seed-0/training-pairs.tsv"));
     let (frag, nofill, reproj, single, scarce) =
         (listing("frag"), listing("frag_nofill_2"), listing("frag_reproj_2"), listing("frag_single_2"), listing("frag4_nofill-lo_2"));

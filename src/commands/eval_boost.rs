@@ -96,6 +96,10 @@ pub struct EvalBoostArgs {
     /// Only these benchmarks of the folders (comma-separated names).
     #[arg(long, value_delimiter = ',')]
     pub only: Vec<String>,
+    /// Tables per benchmark and scene ("3DMatch icl-nuim-livingroom"), not pooled over the scenes of a
+    /// benchmark: for benchmark folders of different scenes (cross-scene tests). Changes only the tables.
+    #[arg(long)]
+    pub by_scene: bool,
     /// Real single-frame pairs: a source frame every this many frames.
     #[arg(long, default_value_t = 2)]
     pub real_every: usize,
@@ -184,6 +188,7 @@ pub fn run(a: &EvalBoostArgs, out: &mut dyn Write) -> Result<()> {
         reference,
         bench: a.bench.clone(),
         only: a.only.clone(),
+        by_scene: a.by_scene,
         conditions: parse_list(&a.conditions)?,
         compare: parse_comparisons(&a.compare)?,
         seeds: a.seeds,

@@ -38,6 +38,8 @@ pub struct BoostConfig {
     /// The evaluation benchmark folders, and the benchmarks of them to score (empty: all).
     pub bench: Vec<PathBuf>,
     pub only: Vec<String>,
+    /// Tables per (benchmark, scene) instead of per benchmark.
+    pub by_scene: bool,
     pub conditions: Vec<Condition>,
     /// Paired differences asked for besides the default ones (names).
     pub compare: Vec<(String, String)>,

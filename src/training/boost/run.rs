@@ -186,7 +186,11 @@ pub fn run_boost(cfg: &BoostConfig, log: &mut dyn FnMut(&str)) -> Result<BoostRe
     for c in &cfg.conditions {
         let mut per_seed = Vec::new();
         for &(_, k) in units.iter().filter(|(u, _)| u.name == c.name) {
-            per_seed.push(scores_file::read(&dir_of(c, k).join(&scores_name))?);
+            let mut scores = scores_file::read(&dir_of(c, k).join(&scores_name))?;
+            if cfg.by_scene {
+                scores.iter_mut().for_each(|s| s.benchmark = format!("{} {}", s.benchmark, s.scene));
+            }
+            per_seed.push(scores);
         }
         results.push((c.name.clone(), per_seed));
     }
