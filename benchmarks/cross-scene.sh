@@ -20,7 +20,9 @@ mkdir -p "$OUT"
 
 frag() { # name sequence args...
   local name=$1 seq=$2; shift 2
-  [[ -d "$OUT/$name" ]] || "$BIN" fragments "$RD/$seq" "$@" --out "$OUT/$name"
+  [[ -f "$OUT/$name.done" ]] && return
+  rm -rf "$OUT/$name"   # a benchmark interrupted half-way is made again
+  "$BIN" fragments "$RD/$seq" "$@" --out "$OUT/$name" && touch "$OUT/$name.done"
 }
 frag bench-R-report 7scenes-redkitchen --frames-per-fragment 25 --stride 10 --first 250 --frames 150
 frag bench-I-report icl-nuim-livingroom --frames-per-fragment 25 --stride 20 --first 400 --frames 401
