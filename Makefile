@@ -12,7 +12,7 @@ export PYTHON
 export PATH := $(POINTREGGPT_VENV)/bin:$(PATH)
 
 # Real depth frames for the real-data tests: POINTREGGPT_REAL_DATA when set, else ../shared/realdata
-# beside the checkout, else fetched once from their public sources (scripts/realdata/manifest.txt, pinned
+# beside the checkout, else fetched once from their public sources (scripts/data-sources/manifest.txt, pinned
 # by SHA-256) into REALDATA_CACHE. POINTREGGPT_DATA_MIRROR=<url> fetches from a mirror instead.
 POINTREGGPT_REAL_DATA ?= $(abspath $(wildcard ../shared/realdata))
 REALDATA_CACHE ?= $(or $(XDG_CACHE_HOME),$(HOME)/.cache)/pointreggpt/realdata

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-# Fetches the real depth frames the tests read (the five folders of scripts/realdata/manifest.txt) from
+# Fetches the real depth frames the tests read (the five folders of scripts/data-sources/manifest.txt) from
 # their public sources into a cache folder, each file pinned by size and SHA-256; `make test` runs it when
 # neither POINTREGGPT_REAL_DATA nor ../shared/realdata is there. Standard library only.
 #
@@ -32,7 +32,7 @@ import zlib
 from array import array
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-MANIFEST = os.path.join(ROOT, "scripts", "realdata", "manifest.txt")
+MANIFEST = os.path.join(ROOT, "scripts", "data-sources", "manifest.txt")
 ATTEMPTS = 3  # per URL, for network errors and 5xx/429 answers; a wrong hash or a 404 is not retried
 WORKERS = 8
 LFS_POINTER = b"version https://git-lfs.github.com/spec/"
@@ -423,7 +423,7 @@ def default_dest():
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description="Fetches the real-data folders of the manifest, pinned by SHA-256.")
-    ap.add_argument("--manifest", default=MANIFEST, help="default: scripts/realdata/manifest.txt")
+    ap.add_argument("--manifest", default=MANIFEST, help="default: scripts/data-sources/manifest.txt")
     ap.add_argument("--dest", default=default_dest(), help="default: $XDG_CACHE_HOME/pointreggpt/realdata (~/.cache/...)")
     ap.add_argument("--mirror", default=os.environ.get("POINTREGGPT_DATA_MIRROR", ""),
                     help="fetch from this server instead (default: $POINTREGGPT_DATA_MIRROR)")

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-# Maintainer tool for scripts/realdata/manifest.txt, the list that scripts/fetch-realdata.py fetches.
+# Maintainer tool for scripts/data-sources/manifest.txt, the list that scripts/fetch-realdata.py fetches.
 #
 #   realdata-manifest.py [--data DIR]                  hash DIR (default ../shared/realdata) and write the manifest:
 #                                                      every file with its size, SHA-256 and upstream URL (FOLDERS)
@@ -72,7 +72,7 @@ def icl_rule(rel):
 
 # folder -> function(data dir) -> rule(path inside the folder) -> manifest words after the pins.
 # depth_stats.tsv (the team's per-frame summary) is made from the folder's PNGs; SOURCE.txt (the team's
-# provenance note) is kept in the checkout as scripts/realdata/<folder>.SOURCE.txt and copied.
+# provenance note) is kept in the checkout as scripts/data-sources/<folder>.SOURCE.txt and copied.
 FOLDERS = {
     "7scenes-redkitchen": lambda data: prefix_rule("tsdf-fusion-python", "data/"),
     "apcbox-realsense": lambda data: prefix_rule("tsdf-fusion", "old-version/data/sample/"),
@@ -85,7 +85,7 @@ FOLDERS = {
 def how(folder, rel, rule):
     name = os.path.basename(rel)
     if rel == "SOURCE.txt":
-        return ["copy", f"scripts/realdata/{folder}.SOURCE.txt"]
+        return ["copy", f"scripts/data-sources/{folder}.SOURCE.txt"]
     if name == "depth_stats.tsv":
         return ["derive", "depth-stats", "pattern=*.depth.png"]
     words = rule(rel)
@@ -142,7 +142,7 @@ def write_mirror(data, out):
 
 
 def main():
-    ap = argparse.ArgumentParser(description="Writes, checks or mirrors scripts/realdata/manifest.txt.")
+    ap = argparse.ArgumentParser(description="Writes, checks or mirrors scripts/data-sources/manifest.txt.")
     ap.add_argument("--data", default=os.path.join(ROOT, "..", "shared", "realdata"))
     ap.add_argument("--check", action="store_true", help="fail unless the manifest matches --data")
     ap.add_argument("--mirror", metavar="OUT", help="write a local copy laid out as the upstream servers serve it")
@@ -161,7 +161,7 @@ def main():
     with open(fetch.MANIFEST, "w") as f:
         f.write(text)
     for folder in FOLDERS:
-        shutil.copyfile(os.path.join(data, folder, "SOURCE.txt"), os.path.join(ROOT, "scripts", "realdata", f"{folder}.SOURCE.txt"))
+        shutil.copyfile(os.path.join(data, folder, "SOURCE.txt"), os.path.join(ROOT, "scripts", "data-sources", f"{folder}.SOURCE.txt"))
     print(f"realdata-manifest: wrote {fetch.MANIFEST} ({text.count(chr(10) + 'file ')} files)", file=sys.stderr)
     return 0
 
