@@ -3,7 +3,7 @@
 //! the fetcher at it). A small synthetic set with its own manifest checks the failure cases: a corrupted
 //! file, a missing one (404), a connection dropped mid-file, a file damaged in the cache; each must be an
 //! error naming the file and its URL, leave nothing unverified in place, and a rerun must finish the job
-//! without fetching again what was verified. Then the real manifest: scripts/realdata/manifest.txt must
+//! without fetching again what was verified. Then the real manifest: scripts/data-sources/manifest.txt must
 //! match `POINTREGGPT_REAL_DATA` file for file, and a fetch from a mirror of it must give every file of
 //! the five folders byte for byte (the derived ones made by the fetcher).
 
@@ -224,14 +224,31 @@ fn good_files_are_fetched_verified_and_derived_once() {
     assert_eq!(mirror.hits(), first, "a complete folder was fetched again");
 }
 
-#[test]
-fn a_corrupted_file_is_an_error_naming_it_and_its_url_and_is_not_kept() {
+/// A fetch from the synthetic mirror with `file` served wrong (`fault`): it must fail. Returns the setup
+/// (temporary folder, manifest, destination, mirror) and the fetcher's stderr.
+fn failing_fetch(file: &str, fault: Fault, what: &str) -> (tempfile::TempDir, PathBuf, PathBuf, Mirror, String) {
     let (tmp, manifest, mirror) = synthetic();
     let dest = tmp.path().join("cache");
-    mirror.fault(&url_path("b.bin"), Some(Fault::Corrupt));
+    mirror.fault(&url_path(file), Some(fault));
     let o = fetch(&manifest, &dest, &mirror, &[]);
     let err = stderr(&o);
-    assert!(!o.status.success(), "a file whose SHA-256 differs was accepted: {err}");
+    assert!(!o.status.success(), "{what} was accepted: {err}");
+    (tmp, manifest, dest, mirror, err)
+}
+
+/// The server serves `file` right again: the rerun completes and fetches only what was not verified.
+fn rerun_after_the_server_is_fixed(tmp: &tempfile::TempDir, manifest: &Path, dest: &Path, mirror: &Mirror, file: &str) {
+    mirror.fault(&url_path(file), None);
+    let o = fetch(manifest, dest, mirror, &[]);
+    assert!(o.status.success(), "rerun against a good server failed: {}", stderr(&o));
+    assert_complete(tmp.path(), dest);
+    let hits = mirror.hits();
+    assert_eq!(hits[&url_path("a.txt")], 1, "a verified file was fetched again: {hits:?}");
+}
+
+#[test]
+fn a_corrupted_file_is_an_error_naming_it_and_its_url_and_is_not_kept() {
+    let (tmp, manifest, dest, mirror, err) = failing_fetch("b.bin", Fault::Corrupt, "a file whose SHA-256 differs");
     assert!(err.contains("scene/b.bin") && err.contains("SHA-256"), "error does not name the file and the hash: {err}");
     assert!(err.contains(&format!("{}{}", mirror.url, url_path("b.bin"))), "error does not name the URL: {err}");
     assert!(err.contains(&format!("https://upstream.invalid{}", url_path("b.bin"))), "error does not name the source: {err}");
@@ -239,23 +256,12 @@ fn a_corrupted_file_is_an_error_naming_it_and_its_url_and_is_not_kept() {
     assert!(!dest.join(".fetch/scene.complete").exists(), "a folder with a bad file was marked complete");
     assert!(!dest.join("scene/intrinsic/intrinsic_depth.txt").exists(), "derived from an incomplete folder");
     assert!(leftovers(&dest).is_empty(), "temporary files left: {:?}", leftovers(&dest));
-    // The server is fixed: the rerun fetches only what was not verified.
-    mirror.fault(&url_path("b.bin"), None);
-    let o = fetch(&manifest, &dest, &mirror, &[]);
-    assert!(o.status.success(), "rerun failed: {}", stderr(&o));
-    assert_complete(tmp.path(), &dest);
-    let hits = mirror.hits();
-    assert_eq!(hits[&url_path("a.txt")], 1, "a verified file was fetched again: {hits:?}");
+    rerun_after_the_server_is_fixed(&tmp, &manifest, &dest, &mirror, "b.bin");
 }
 
 #[test]
 fn a_missing_file_is_an_error_naming_it() {
-    let (tmp, manifest, mirror) = synthetic();
-    let dest = tmp.path().join("cache");
-    mirror.fault(&url_path("cam.txt"), Some(Fault::Missing));
-    let o = fetch(&manifest, &dest, &mirror, &[]);
-    let err = stderr(&o);
-    assert!(!o.status.success(), "a 404 was accepted: {err}");
+    let (_tmp, _manifest, dest, _mirror, err) = failing_fetch("cam.txt", Fault::Missing, "a 404");
     assert!(err.contains("scene/cam.txt") && err.contains("404"), "error does not name the file and the 404: {err}");
     assert!(err.contains(&url_path("cam.txt")), "error does not name the URL: {err}");
     assert!(!dest.join("scene/cam.txt").exists() && !dest.join("scene/intrinsic/intrinsic_depth.txt").exists());
@@ -264,22 +270,13 @@ fn a_missing_file_is_an_error_naming_it() {
 
 #[test]
 fn a_dropped_connection_leaves_nothing_half_written_and_a_rerun_completes() {
-    let (tmp, manifest, mirror) = synthetic();
-    let dest = tmp.path().join("cache");
-    mirror.fault(&url_path("b.bin"), Some(Fault::Drop));
-    let o = fetch(&manifest, &dest, &mirror, &[]);
-    let err = stderr(&o);
-    assert!(!o.status.success(), "a file cut short was accepted: {err}");
+    let (tmp, manifest, dest, mirror, err) = failing_fetch("b.bin", Fault::Drop, "a file cut short");
     assert!(err.contains("scene/b.bin") && err.contains(&url_path("b.bin")), "error does not name the file and URL: {err}");
     assert!(mirror.hits()[&url_path("b.bin")] >= 2, "a dropped connection is retried");
     assert!(!dest.join("scene/b.bin").exists(), "half a file was put in place");
     assert!(leftovers(&dest).is_empty(), "temporary files left: {:?}", leftovers(&dest));
     assert!(!dest.join(".fetch/scene.complete").exists());
-    mirror.fault(&url_path("b.bin"), None);
-    let o = fetch(&manifest, &dest, &mirror, &[]);
-    assert!(o.status.success(), "rerun against a good server failed: {}", stderr(&o));
-    assert_complete(tmp.path(), &dest);
-    assert_eq!(mirror.hits()[&url_path("a.txt")], 1, "a verified file was fetched again");
+    rerun_after_the_server_is_fixed(&tmp, &manifest, &dest, &mirror, "b.bin");
 }
 
 #[test]
@@ -304,13 +301,13 @@ fn a_file_damaged_in_the_cache_is_fetched_again() {
 fn the_real_manifest_rebuilds_the_local_folders_byte_for_byte() {
     let Some(real) = real_data() else { return };
     let o = python_command().arg(MAINTAIN).arg("--check").arg("--data").arg(&real).output().unwrap();
-    assert!(o.status.success(), "scripts/realdata/manifest.txt does not match {}: {}", real.display(), stderr(&o));
+    assert!(o.status.success(), "scripts/data-sources/manifest.txt does not match {}: {}", real.display(), stderr(&o));
     let tmp = tempfile::tempdir().unwrap();
     let o = python_command().arg(MAINTAIN).arg("--data").arg(&real).arg("--mirror").arg(tmp.path().join("mirror")).output().unwrap();
     assert!(o.status.success(), "mirror: {}", stderr(&o));
     let mirror = Mirror::start(&tmp.path().join("mirror"));
     let dest = tmp.path().join("cache");
-    let manifest = Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/realdata/manifest.txt");
+    let manifest = Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/data-sources/manifest.txt");
     let t0 = std::time::Instant::now();
     let o = fetch(&manifest, &dest, &mirror, &[]);
     assert!(o.status.success(), "fetch of the real manifest failed: {}", stderr(&o));
