@@ -128,7 +128,7 @@ pub fn run(args: &FragmentsArgs, out: &mut dyn Write) -> Result<()> {
             (seq.name.clone(), clouds, fragments_within(0, seq.frames.len(), per, stride).len(), ["3DMatch", "3DLoMatch"])
         };
         write_scene(args, &scene, &clouds, n, names, out)?;
-        if unposed > 0 || seq.poses.exact + seq.poses.interpolated > 0 {
+        if unposed > 0 || seq.poses.from_timestamps() {
             writeln!(out, "{scene}: {}; {unposed} of the frames used left out for want of a pose", seq.poses.describe()).map_err(|e| Error::io("<stdout>", e))?;
         }
     }

@@ -22,10 +22,10 @@ pub fn run(args: &InspectArgs, out: &mut dyn Write) -> Result<()> {
     let sequences = open_sequences(&args.root, args.open.options()?)?;
     let mut failures = 0usize;
     for seq in &sequences {
-        let with_pose = seq.frames.iter().filter(|f| f.pose != crate::sources::PoseSource::None).count();
+        let with_pose = seq.frames.iter().filter(|f| f.has_pose()).count();
         let k = seq.frames.first().map(|f| f.intrinsics);
         writeln!(out, "{}: {} frames ({} with a pose) in {}", seq.name, seq.frames.len(), with_pose, seq.root.display()).map_err(w)?;
-        if seq.poses.exact + seq.poses.interpolated > 0 {
+        if seq.poses.from_timestamps() {
             writeln!(out, "  ground truth: {} (interpolated across gaps up to {} ms)", seq.poses.describe(), crate::sources::tum::MAX_INTERPOLATION_GAP * 1000.0).map_err(w)?;
         }
         if let Some(k) = k {

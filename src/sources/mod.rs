@@ -97,9 +97,7 @@ impl FrameRef {
             content_hash,
         })
     }
-}
 
-impl FrameRef {
     /// Whether the sequence gives this frame a pose (a pose file, or a known pose). A pose file can
     /// still fail to load (unparsable, non-finite): that is bad input, not a missing pose.
     pub fn has_pose(&self) -> bool {

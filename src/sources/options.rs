@@ -95,11 +95,16 @@ pub struct PoseCounts {
 }
 
 impl PoseCounts {
+    /// Whether the poses were matched to the frames by timestamp (TUM), so the counts are worth printing.
+    pub fn from_timestamps(&self) -> bool {
+        self.exact + self.interpolated > 0
+    }
+
     /// One line for summaries, e.g. `700 exact, 19 interpolated, 3 without a pose`; empty when every
     /// frame of a layout without timestamps has its pose.
     pub fn describe(&self) -> String {
         let mut parts = Vec::new();
-        if self.exact + self.interpolated > 0 {
+        if self.from_timestamps() {
             parts.push(format!("{} poses exact, {} interpolated", self.exact, self.interpolated));
         }
         if self.without > 0 {
