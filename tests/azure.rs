@@ -2,7 +2,8 @@
 //! `azurite`, in memory, on 127.0.0.1): a build to `az://` equals the same build to a folder (content hash
 //! for content hash) and queries and pyarrow agree; SIGKILLs mid-build then a resume; two writers racing
 //! on the same shards; `verify --repair` of a corrupted shard, an orphan object and a dead writer's block
-//! upload; large shards in blocks; bad containers and an unreachable server. Clients run in object_store's
+//! upload, next to a live writer whose blocks, blobs and records it leaves alone; large shards in blocks;
+//! bad containers and an unreachable server, refused before any frame is read or blob written. Clients run in object_store's
 //! emulator mode (the development account, `AZURITE_BLOB_STORAGE_URL`), never against a cloud endpoint.
 //! Tests fail (never skip) when Azurite cannot start.
 
@@ -374,21 +375,43 @@ fn large_shards_go_up_in_blocks_and_read_back_whole() {
     assert_clean(&ep, "big", "ds");
 }
 
+/// Every blob name of `container` (uncommitted block uploads included), and the container names.
+fn everything(endpoint: &str, container: &str) -> (String, String) {
+    (peer(endpoint, &["names", endpoint, container]), peer(endpoint, &["containers", endpoint]))
+}
+
 #[test]
 fn a_missing_container_and_an_unreachable_azurite_fail_clearly_before_any_work() {
     let w = World::new("present");
     let ep = w.endpoint();
     let config = w.dir.path().join("c.toml");
     std::fs::write(&config, synthetic_config(1, 4, 2, 1, 160, 120, 2)).unwrap();
+    let trap = support::strict_trap(w.dir.path());
+    // The trap works: on a reachable container the strict build fails on the truncated frame.
+    let o = build(&ep, &trap, "az://present/probe").arg("--strict").output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("frame-000000.depth.png"), "the strict build did not stop at the bad frame: {err}");
+    peer(&ep, &["delete", &ep, "present", "probe/dataset.toml"]);
+    let empty = (String::from("[]"), String::from(r#"["present"]"#));
+    assert_eq!(everything(&ep, "present"), empty, "the probe left blobs");
+
+    // Each bad URL: the command fails naming the URL and the reason, without reading any frame (the
+    // strict build would stop at the truncated one), without writing any blob or block to the server,
+    // without creating a container, and without leaving anything in its working folder.
     let fails = |endpoint: &str, out: &str, wants: &[&str]| {
         let t = Instant::now();
-        let o = build(endpoint, &config, out).output().unwrap();
+        let cwd = tempfile::tempdir().unwrap();
+        let o = build(endpoint, &trap, out).arg("--strict").current_dir(cwd.path()).output().unwrap();
         let err = String::from_utf8_lossy(&o.stderr);
         assert!(!o.status.success(), "{out}: {err}");
+        assert!(!err.contains("depth.png"), "{out}: the build read a frame before failing: {err}");
         assert!(!String::from_utf8_lossy(&o.stdout).contains("units in"), "{out}: the build started");
         for w in wants {
             assert!(err.contains(w), "{out}: `{w}` not in: {err}");
         }
+        let left: Vec<_> = std::fs::read_dir(cwd.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
+        assert!(left.is_empty(), "{out}: left {left:?} in the working folder");
+        assert_eq!(everything(&ep, "present"), empty, "{out}: blobs were written or a container created");
         eprintln!("{out}: failed in {:.1} s: {}", t.elapsed().as_secs_f64(), err.trim());
     };
     fails(&ep, "az://missing/ds", &["az://missing/ds", "ContainerNotFound", "does the bucket exist"]);
@@ -396,4 +419,94 @@ fn a_missing_container_and_an_unreachable_azurite_fail_clearly_before_any_work()
     fails(&format!("http://127.0.0.1:{closed}"), "az://present/ds", &["az://present/ds", "cannot reach the store"]);
     // The container that exists works.
     assert!(ok(build(&ep, &config, "az://present/ds").output().unwrap()).contains("1 committed now"));
+}
+
+#[test]
+fn repair_on_azure_leaves_live_writers_alone_and_removes_stale_records_and_planted_orphans() {
+    use pointreggpt::atomic::hostname;
+    let w = World::new("repair");
+    let e = w.endpoint();
+    let config = w.dir.path().join("c.toml");
+    std::fs::write(&config, synthetic_config(1, 8, 2, 1, 160, 120, 1)).unwrap();
+    let url = "az://repair/ds";
+    ok(build(&e, &config, url).output().unwrap());
+    let committed = digests(url);
+    assert_eq!(committed.len(), 4);
+    let before = objects(&e, "repair", "ds");
+    let shard = before.keys().find(|k| k.starts_with("shards/")).unwrap().clone();
+    let record = |object: &str| serde_json::json!({ "object": object, "upload_id": "" }).to_string();
+    let put = |key: &str, text: &str| peer(&e, &["put", &e, "repair", &format!("ds/{key}"), text]);
+    let copy = |object: &str| peer(&e, &["copy", &e, "repair", &format!("ds/{shard}"), &format!("ds/shards/{object}")]);
+
+    // A live writer on this host (a process that runs: `sleep`): one blob mid block upload, one whole
+    // blob put but not yet committed. Both have their records.
+    struct Running(std::process::Child);
+    impl Drop for Running {
+        fn drop(&mut self) {
+            let _ = self.0.kill();
+            let _ = self.0.wait();
+        }
+    }
+    let mut writer = Running(support::command("sleep").arg("600").spawn().unwrap());
+    let (host, pid) = (hostname(), writer.0.id());
+    let live_blocks = "pairs-000005-1111111111111111.parquet";
+    let live_blocks_record = format!("{host}~{pid}~{live_blocks}~1.tmp");
+    peer(&e, &["abandon", &e, "repair", "ds", &live_blocks_record, live_blocks]);
+    let live_put = "pairs-000006-2222222222222222.parquet";
+    let live_put_record = format!("{host}~{pid}~{live_put}~2.tmp");
+    put(&format!(".tmp/{live_put_record}"), &record(live_put));
+    copy(live_put);
+    // A writer of another host: its record is not stale from here (for an hour).
+    let remote = "pairs-000007-3333333333333333.parquet";
+    let remote_record = format!("elsewhere.example~{pid}~{remote}~3.tmp");
+    put(&format!(".tmp/{remote_record}"), &record(remote));
+    copy(remote);
+    // A writer of this host that died (a pid above Linux's pid_max, never running) after putting its blob.
+    let dead = "pairs-000001-4444444444444444.parquet";
+    let dead_record = format!("{host}~{}~{dead}~4.tmp", 4_194_304 + 9);
+    put(&format!(".tmp/{dead_record}"), &record(dead));
+    copy(dead);
+    // A whole valid shard blob that no record and no entry names (a writer that lost a race and could
+    // not delete it): a planted orphan.
+    let orphan = "pairs-000002-5555555555555555.parquet";
+    copy(orphan);
+    let live_upload = vec![format!("ds/shards/{live_blocks}")];
+    assert_eq!(uncommitted(&e, "repair"), live_upload);
+
+    let report = ok(run(&e, &["verify", url]).output().unwrap());
+    for (name, says) in [
+        (dead_record.as_str(), "stale temporary file"),
+        (live_blocks_record.as_str(), "temporary file of a running or remote process"),
+        (live_put_record.as_str(), "temporary file of a running or remote process"),
+        (remote_record.as_str(), "temporary file of a running or remote process"),
+        (orphan, "uncommitted shard file"),
+    ] {
+        assert!(report.lines().any(|l| l.contains(name) && l.contains(says)), "verify does not list {name} as {says}:\n{report}");
+    }
+    let repaired = ok(run(&e, &["verify", "--repair", url]).output().unwrap());
+    let after = objects(&e, "repair", "ds");
+    let has = |key: &str| after.contains_key(key);
+    // The live writer's staged blocks, blob and records are untouched, and so are the remote writer's.
+    assert_eq!(uncommitted(&e, "repair"), live_upload, "repair dropped a live writer's block upload:\n{repaired}");
+    for key in [format!(".tmp/{live_blocks_record}"), format!(".tmp/{live_put_record}"), format!("shards/{live_put}"), format!(".tmp/{remote_record}"), format!("shards/{remote}")] {
+        assert!(has(&key), "repair removed {key} of a running writer:\n{repaired}");
+    }
+    // The dead writer's record and blob, and the planted orphan, are gone.
+    for key in [format!(".tmp/{dead_record}"), format!("shards/{dead}"), format!("shards/{orphan}")] {
+        assert!(!has(&key), "repair left {key}:\n{repaired}");
+    }
+    // Committed data untouched: every blob that was there before, the same bytes (ETag).
+    for (key, v) in &before {
+        assert_eq!(after.get(key), Some(v), "repair changed the committed blob {key}");
+    }
+    assert_eq!(digests(url), committed);
+    assert!(Dataset::open(url).unwrap().verify().unwrap().is_ok());
+
+    // The writer dies: now its records are stale, and repair drops its blocks and removes its blobs.
+    writer.0.kill().unwrap();
+    writer.0.wait().unwrap();
+    peer(&e, &["delete", &e, "repair", &format!("ds/.tmp/{remote_record}")]);
+    assert_clean(&e, "repair", "ds");
+    assert_eq!(digests(url), committed);
+    assert!(!objects(&e, "repair", "ds").contains_key(&format!("shards/{remote}")), "an unnamed blob stayed");
 }

@@ -14,7 +14,7 @@ use std::time::{Duration, Instant};
 use std::path::PathBuf;
 use std::sync::MutexGuard;
 use support::store::{Moto, Proxy, ENV};
-use support::{bin, digests, synthetic_config, synthetic_labels_config};
+use support::{bin, digests, strict_trap, synthetic_config, synthetic_labels_config};
 
 /// One test's S3 world: a moto server with one bucket and a temporary folder, under the lock of the
 /// process environment (the tests point the AWS variables at their own server).
@@ -247,21 +247,6 @@ fn two_writers_racing_on_the_same_shards_leave_one_object_per_shard() {
     assert_ne!(again.file, entries[0].file);
     assert_eq!(ds.read_pairs().unwrap(), rows);
     assert!(ds.verify().unwrap().is_ok());
-}
-
-/// A 3DMatch-layout folder of three synthetic frames whose first depth PNG is truncated, and a build
-/// config reading it: with `--strict`, a build that starts work stops at that frame, naming it. A
-/// command refused "before any work" never reads it, so its error names the store instead.
-fn strict_trap(dir: &Path) -> PathBuf {
-    use pointreggpt::sources::synthetic::{SyntheticConfig, SyntheticSequence};
-    let data = dir.join("frames");
-    SyntheticSequence::generate(&SyntheticConfig { frames: 3, ..Default::default() }, 5).unwrap().write_3dmatch(&data).unwrap();
-    let png = data.join("frame-000000.depth.png");
-    let bytes = std::fs::read(&png).unwrap();
-    std::fs::write(&png, &bytes[..bytes.len() / 4]).unwrap();
-    let config = dir.join("strict.toml");
-    std::fs::write(&config, format!("shard_size = 1\n[source]\nkind = \"directory\"\npath = \"{}\"\n", data.display())).unwrap();
-    config
 }
 
 #[test]

@@ -9,6 +9,9 @@
   put ENDPOINT CONTAINER NAME TEXT            writes one blob (overwrites)
   corrupt ENDPOINT CONTAINER NAME             flips one byte of a blob (same size)
   abandon ENDPOINT CONTAINER PREFIX RECORD OBJECT   a writer that died mid block upload: one block staged, record written
+  copy ENDPOINT CONTAINER FROM TO             copies one blob to another name of the container
+  names ENDPOINT CONTAINER                    every blob name of the container, uncommitted block uploads included
+  containers ENDPOINT                         the container names
 
 ENDPOINT is Azurite's blob endpoint, http://127.0.0.1:<port>; the account is Azurite's well-known
 devstoreaccount1 with its published key (the same object_store's emulator mode uses). Rows are printed as
@@ -95,6 +98,16 @@ def main():
         # object_store's Azure client has no upload id (blocks belong to the blob name): it records "".
         body = json.dumps({"object": obj, "upload_id": ""}).encode()
         c.upload_blob(f"{prefix}/.tmp/{record}", body, overwrite=True)
+    elif cmd == "copy":
+        endpoint, name, source, target = args
+        c = container(endpoint, name)
+        c.upload_blob(target, c.download_blob(source).readall(), overwrite=True)
+    elif cmd == "names":
+        endpoint, name = args
+        print(json.dumps(sorted(b.name for b in container(endpoint, name).list_blobs(include=["uncommittedblobs"]))))
+    elif cmd == "containers":
+        (endpoint,) = args
+        print(json.dumps(sorted(c.name for c in service(endpoint).list_containers())))
     else:
         sys.exit(f"unknown command {cmd}")
 

@@ -1,26 +1,41 @@
 """Independent readers of a dataset's Delta Lake table (tests/delta.rs): the `deltalake` package, Polars and
 DuckDB (through deltalake's pyarrow dataset: DuckDB's wheel has no delta extension offline).
 
-  rows TABLE [VERSION]      the rows, read with deltalake (DeltaTable(TABLE, version=VERSION))
-  polars TABLE              the rows, read with Polars: pl.scan_delta on the columns it reads natively, and
-                            pl.read_delta(use_pyarrow=True) for the point counts (see the README)
+  rows TABLE [VERSION]      every row, read with deltalake (DeltaTable(TABLE, version=VERSION)): the scalar
+                            columns and the point lists, value by value
+  polars TABLE              the same rows read with Polars: pl.scan_delta on the columns it reads natively,
+                            and pl.read_delta(use_pyarrow=True) for the point lists (see the README)
   duckdb TABLE SQL          DuckDB over DeltaTable(TABLE).to_pyarrow_dataset() as `pairs`: the result rows
   info TABLE [VERSION]      version, schema (column -> Delta type), add actions (path -> num_records), history length
   corrupt TABLE FILE        changes one byte of the shard file's footer (its created_by string): another blake3,
                             still a Parquet file with the same rows
 
-TABLE is a folder or an s3:// URL; for s3:// the endpoint and keys come from AWS_ENDPOINT_URL,
-AWS_ACCESS_KEY_ID, AWS_SECRET_ACCESS_KEY and AWS_REGION (never the instance metadata service).
-Rows are printed as JSON: {pair_key: {column: value}}.
+TABLE is a folder, an s3:// URL or an az:// URL. For s3:// the endpoint and keys come from AWS_ENDPOINT_URL,
+AWS_ACCESS_KEY_ID, AWS_SECRET_ACCESS_KEY and AWS_REGION (never the instance metadata service); az:// is a
+local Azurite in object_store's emulator mode (AZURITE_BLOB_STORAGE_URL, Azurite's published development
+account). Rows are printed as a JSON list of {column: value}, one per row as the reader returned it
+(duplicates kept: the caller counts them).
 """
 import json
 import os
 import sys
 
 COLUMNS = ["pair_key", "unit_index", "seed", "status", "overlap_source", "overlap_target", "target_view", "target_known_share"]
+POINTS = ["source_points", "target_points"]
+
+# Azurite's well-known development account (public, documented; not a secret).
+AZURITE_ACCOUNT = "devstoreaccount1"
+AZURITE_KEY = "Eby8vdM02xNOcqFlqUwJPLlmEtlCDXJ1OUzFT50uSRZ6IFsuFq2UVErCz4I6tq/K1SZFPTOtr/KBHBeksoGMGw=="
 
 
 def storage(table):
+    if table.startswith("az://"):
+        # Emulator mode: the blob endpoint comes from AZURITE_BLOB_STORAGE_URL.
+        return {
+            "azure_storage_account_name": AZURITE_ACCOUNT,
+            "azure_storage_account_key": AZURITE_KEY,
+            "azure_storage_use_emulator": "true",
+        }
     if not table.startswith("s3://"):
         return None
     return {
@@ -38,28 +53,23 @@ def delta_table(table, version=None):
     return DeltaTable(table, version=None if version is None else int(version), storage_options=storage(table))
 
 
-def by_key(records):
-    return {r["pair_key"]: r for r in records}
-
-
 def rows(table, version=None):
-    t = delta_table(table, version).to_pyarrow_table()
-    out = by_key(t.select(COLUMNS).to_pylist())
-    for key, points in zip(t.column("pair_key").to_pylist(), t.column("target_points").to_pylist()):
-        out[key]["n_target_points"] = len(points)
-    return out
+    return delta_table(table, version).to_pyarrow_table().select(COLUMNS + POINTS).to_pylist()
 
 
 def polars_rows(table):
     import polars as pl
 
     # Polars' own Parquet reader refuses the fixed-size lists (points, poses) under Delta's `array` type;
-    # every other column reads natively. The whole table reads through deltalake's pyarrow dataset.
-    native = pl.scan_delta(table, storage_options=storage(table)).select(COLUMNS).collect()
-    out = by_key(native.to_dicts())
-    whole = pl.read_delta(table, storage_options=storage(table), use_pyarrow=True)
-    for key, n in whole.select("pair_key", pl.col("target_points").list.len()).iter_rows():
-        out[key]["n_target_points"] = n
+    # every other column reads natively. The point lists read through deltalake's pyarrow dataset, joined
+    # by row position (both readers list the table's files in the log's order).
+    native = pl.scan_delta(table, storage_options=storage(table)).select(COLUMNS).collect().to_dicts()
+    whole = pl.read_delta(table, storage_options=storage(table), use_pyarrow=True).select(["pair_key"] + POINTS).to_dicts()
+    assert len(native) == len(whole), f"polars: {len(native)} rows natively, {len(whole)} through pyarrow"
+    out = []
+    for a, b in zip(sorted(native, key=lambda r: r["pair_key"]), sorted(whole, key=lambda r: r["pair_key"])):
+        assert a["pair_key"] == b["pair_key"], (a["pair_key"], b["pair_key"])
+        out.append({**a, **{c: b[c] for c in POINTS}})
     return out
 
 

@@ -160,3 +160,18 @@ pub fn digests(dataset: impl AsRef<std::path::Path>) -> std::collections::BTreeM
     let ds = pointreggpt::shards::dataset::Dataset::open(dataset).unwrap();
     ds.read_pairs().unwrap().iter().map(|r| (r.unit_index, r.content_digest().to_hex().to_string())).collect()
 }
+
+/// A 3DMatch-layout folder of three synthetic frames whose first depth PNG is truncated, and a build
+/// config reading it: with `--strict`, a build that starts work stops at that frame, naming it. A
+/// command refused "before any work" never reads it, so its error names the store instead.
+pub fn strict_trap(dir: &std::path::Path) -> PathBuf {
+    use pointreggpt::sources::synthetic::{SyntheticConfig, SyntheticSequence};
+    let data = dir.join("frames");
+    SyntheticSequence::generate(&SyntheticConfig { frames: 3, ..Default::default() }, 5).unwrap().write_3dmatch(&data).unwrap();
+    let png = data.join("frame-000000.depth.png");
+    let bytes = std::fs::read(&png).unwrap();
+    std::fs::write(&png, &bytes[..bytes.len() / 4]).unwrap();
+    let config = dir.join("strict.toml");
+    std::fs::write(&config, format!("shard_size = 1\n[source]\nkind = \"directory\"\npath = \"{}\"\n", data.display())).unwrap();
+    config
+}

@@ -165,7 +165,7 @@ fn hint(e: &object_store::Error) -> &'static str {
     } else if has(&["NoSuchBucket", "ContainerNotFound", "404 Not Found"]) || matches!(e, object_store::Error::NotFound { .. }) {
         " (does the bucket exist?)"
     } else if has(&["error sending request", "Connection refused", "dns error"]) {
-        " (cannot reach the store: check the endpoint, e.g. AWS_ENDPOINT_URL, and the network)"
+        " (cannot reach the store: check the endpoint, e.g. AWS_ENDPOINT_URL or AZURITE_BLOB_STORAGE_URL, and the network)"
     } else {
         ""
     }
