@@ -22,7 +22,7 @@ use support::{bin, digests, synthetic_config};
 
 fn build_in_process(config_text: &str, out: &Path, threads: usize) -> BTreeMap<u64, String> {
     let config = BuildConfig::from_toml(config_text, "test").unwrap();
-    let opts = BuildOptions { out: out.to_path_buf(), worker: 0, workers: 1, strict: false, progress: false };
+    let opts = BuildOptions::into_folder(out.to_path_buf());
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
     let report = pool.install(|| run_build(&config, &opts, &CancelToken::new())).unwrap();
     assert_eq!(report.rows_by_status.values().sum::<u64>(), report.total_units);
@@ -319,6 +319,40 @@ fn bad_frames_become_input_error_rows_unposed_frames_build_and_strict_stops_nami
     // The shard holding the bad frame is not committed.
     let strict = Dataset::open(dir.path().join("strict")).unwrap();
     assert!(!strict.committed("pairs").unwrap().contains_key(&0) || !strict.committed("pairs").unwrap().contains_key(&1));
+}
+
+/// The build's own count of prepared frames, from its summary ("frames decoded N times").
+fn frames_decoded(stdout: &[u8]) -> u64 {
+    let text = String::from_utf8_lossy(stdout);
+    let at = text.find("frames decoded ").unwrap_or_else(|| panic!("no frame count in: {text}")) + "frames decoded ".len();
+    text[at..].split_whitespace().next().unwrap().parse().unwrap()
+}
+
+#[test]
+fn the_frame_cache_decodes_each_frame_once_and_changes_no_pair() {
+    // Three samples per frame on frames that include a truncated PNG, a bad pose file and a frame
+    // without a pose: with the cache (the default) and without it (--frame-cache 0), every row's content
+    // is the same, input errors included; with it each frame is decoded once, without it once per unit.
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("seq");
+    folder_with_bad_frames(&data);
+    let config = dir.path().join("c.toml");
+    std::fs::write(&config, format!("shard_size = 5\nsamples_per_frame = 3\n[source]\nkind = \"directory\"\npath = \"{}\"\n", data.display())).unwrap();
+    let run = |name: &str, extra: &[&str]| {
+        let out = dir.path().join(name);
+        let o = spawn_build(&config, &out, extra).wait_with_output().unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        (digests(out.to_str().unwrap()), frames_decoded(&o.stdout))
+    };
+    let (cached, decoded) = run("cached", &[]);
+    let (fresh, decoded_fresh) = run("fresh", &["--frame-cache", "0"]);
+    assert_eq!(cached.len(), 24, "8 frames x 3 samples");
+    assert_eq!(cached, fresh, "the same pairs, content hash for content hash");
+    // The pose file is read at ingest too: frame 5's bad pose fails for each of its units either way.
+    assert_eq!(decoded_fresh, 24);
+    assert_eq!(decoded, 6 + 2 * 3, "good frames once; a failing frame is tried by each of its units, so each gets its error");
+    let rows = Dataset::open(dir.path().join("cached")).unwrap().read_pairs().unwrap();
+    assert_eq!(rows.iter().filter(|r| r.status == Status::InputError).count(), 6, "2 bad frames x 3 samples");
 }
 
 #[test]

@@ -36,7 +36,7 @@ fn labels_config(first_seed: u64, scenes: u32, frames: usize, samples: u32, size
 }
 
 fn make_labels(config: &LabelsConfig, out: &Path) {
-    let opts = BuildOptions { out: out.to_path_buf(), worker: 0, workers: 1, strict: true, progress: false };
+    let opts = BuildOptions { strict: true, ..BuildOptions::into_folder(out.to_path_buf()) };
     run_labels(config, &opts, &CancelToken::new()).unwrap();
 }
 

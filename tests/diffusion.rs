@@ -422,7 +422,7 @@ fn build_twice_and_compare(config: &BuildConfig, dir: &Path) {
     let mut digests = Vec::new();
     for threads in [1, 2] {
         let out = dir.join(format!("ds{threads}"));
-        let opts = BuildOptions { out: out.clone(), worker: 0, workers: 1, strict: true, progress: false };
+        let opts = BuildOptions { strict: true, ..BuildOptions::into_folder(out.clone()) };
         let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
         pool.install(|| run_build(config, &opts, &CancelToken::new())).unwrap();
         let rows = Dataset::open(&out).unwrap().read_pairs().unwrap();

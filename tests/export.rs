@@ -29,7 +29,7 @@ fn build(dir: &Path) -> (PathBuf, Vec<PairRow>) {
     let text = synthetic_config(2, 12, 3, 1, 320, 240, 4) + "[validate]\nmin_overlap = 0.6\n";
     let config = BuildConfig::from_toml(&text, "test").unwrap();
     let out = dir.join("ds");
-    let opts = BuildOptions { out: out.clone(), worker: 0, workers: 1, strict: false, progress: false };
+    let opts = BuildOptions::into_folder(out.clone());
     run_build(&config, &opts, &CancelToken::new()).unwrap();
     let rows = Dataset::open(&out).unwrap().read_pairs().unwrap();
     assert_eq!(rows.len(), 8);

@@ -255,7 +255,7 @@ fn two_processes_claiming_the_same_shards_give_one_result_and_no_torn_file() {
     std::fs::write(&config, &text).unwrap();
     let cfg = BuildConfig::from_toml(&text, "t").unwrap();
     let reference_dir = dir.path().join("ref");
-    run_build(&cfg, &BuildOptions { out: reference_dir.clone(), worker: 0, workers: 1, strict: false, progress: false }, &CancelToken::new()).unwrap();
+    run_build(&cfg, &BuildOptions::into_folder(reference_dir.clone()), &CancelToken::new()).unwrap();
     let reference = digests(&reference_dir, "pairs");
     let shards = committed_shards(&reference_dir, "pairs");
     assert_eq!(shards, 8);

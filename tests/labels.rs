@@ -81,7 +81,7 @@ fn read_labels(out: &Path) -> Vec<LabelRow> {
 fn labels_agree_with_the_exact_penetration_mask() {
     let dir = tempfile::tempdir().unwrap();
     let config: LabelsConfig = toml::from_str(CONFIG).unwrap();
-    let opts = BuildOptions { out: dir.path().join("labels"), worker: 0, workers: 1, strict: false, progress: false };
+    let opts = BuildOptions::into_folder(dir.path().join("labels"));
     let report = run_labels(&config, &opts, &CancelToken::new()).unwrap();
     assert_eq!(report.rows_by_status.get("ok"), Some(&6), "2 windows x 3 samples");
 

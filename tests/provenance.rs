@@ -19,7 +19,7 @@ const VOXEL: f64 = 0.025;
 fn build(dir: &Path, extra: &str) -> Vec<PairRow> {
     let text = synthetic_config(2, 16, 4, 2, 320, 240, 4) + extra;
     let config = BuildConfig::from_toml(&text, "test").unwrap();
-    let opts = BuildOptions { out: dir.to_path_buf(), worker: 0, workers: 1, strict: false, progress: false };
+    let opts = BuildOptions::into_folder(dir.to_path_buf());
     run_build(&config, &opts, &CancelToken::new()).unwrap();
     let rows: Vec<PairRow> = Dataset::open(dir).unwrap().read_pairs().unwrap().into_iter().filter(|r| r.status == Status::Ok).collect();
     assert!(rows.len() >= 6, "the test wants several ok pairs, got {}", rows.len());

@@ -11,7 +11,7 @@ fn dataset(dir: &Path) -> std::path::PathBuf {
     let text = synthetic_config(2, 16, 2, 1, 320, 240, 3) + "[validate]\nmin_overlap = 0.6\n";
     let config = BuildConfig::from_toml(&text, "t").unwrap();
     let out = dir.join("ds");
-    let opts = BuildOptions { out: out.clone(), worker: 0, workers: 1, strict: false, progress: false };
+    let opts = BuildOptions::into_folder(out.clone());
     run_build(&config, &opts, &CancelToken::new()).unwrap();
     out
 }

@@ -25,6 +25,11 @@ pub struct BuildArgs {
     /// (`pointreggpt publish` does it later).
     #[arg(long)]
     pub no_publish: bool,
+    /// Frames kept decoded, resized and back-projected for their next samples (a frame's
+    /// samples_per_frame samples are consecutive units), about 1 MB each; 0 decodes each unit's frame
+    /// anew. The pairs are the same either way.
+    #[arg(long, value_name = "FRAMES", default_value_t = BuildOptions::FRAME_CACHE)]
+    pub frame_cache: usize,
 }
 
 /// The flags `build` and `labels` share: where the dataset goes, overrides, the worker split.
@@ -62,7 +67,7 @@ impl RunArgs {
     pub fn options(&self, config: &Path) -> Result<BuildOptions> {
         let (worker, workers) = worker_from_env(self.worker, self.workers)?;
         let out = self.out.clone().unwrap_or_else(|| PathBuf::from("out").join(config.file_stem().unwrap_or_default()));
-        Ok(BuildOptions { out, worker, workers, strict: self.strict, progress: !self.no_progress })
+        Ok(BuildOptions { out, worker, workers, strict: self.strict, progress: !self.no_progress, frame_cache: BuildOptions::FRAME_CACHE })
     }
 }
 
@@ -102,7 +107,7 @@ pub fn run(args: &BuildArgs, out: &mut dyn Write) -> Result<()> {
         write!(out, "{}", config.to_toml()).map_err(w)?;
         return Ok(());
     }
-    let opts = args.run.options(&args.config)?;
+    let opts = BuildOptions { frame_cache: args.frame_cache, ..args.run.options(&args.config)? };
     let (dataset, worker, workers) = (opts.out.clone(), opts.worker, opts.workers);
     let cancel = CancelToken::new();
     cancel.cancel_on_signals();
@@ -122,7 +127,8 @@ pub fn run(args: &BuildArgs, out: &mut dyn Write) -> Result<()> {
     .map_err(w)?;
     let by: Vec<String> = r.rows_by_status.iter().map(|(k, v)| format!("{k} {v}")).collect();
     writeln!(out, "rows written: {rows} ({})", if by.is_empty() { "none".into() } else { by.join(", ") }).map_err(w)?;
-    writeln!(out, "time {:.1} s, {:.1} pairs/s", r.summary.wall.as_secs_f64(), r.summary.rate()).map_err(w)?;
+    writeln!(out, "time {:.1} s, {:.1} pairs/s; frames decoded {} times", r.summary.wall.as_secs_f64(), r.summary.rate(), r.frames_prepared)
+        .map_err(w)?;
     write!(out, "{}", r.summary.stage_table()).map_err(w)?;
     writeln!(out, "committed shards: listed in {}/manifest/", dataset.display()).map_err(w)?;
     writeln!(

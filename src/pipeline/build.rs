@@ -10,7 +10,8 @@ use crate::shards::plan::{check_worker, plan_shards, shard_count, shard_units};
 use crate::shards::CODE_VERSION;
 use crate::sources::Catalog;
 use crate::stages::correct::Target;
-use crate::stages::ingest::Ingest;
+use crate::stages::frame_cache::FrameCache;
+use crate::stages::ingest::{Ingest, PreparedFrame};
 use crate::stages::inpaint::Inpaint;
 use crate::stages::pack::Pack;
 use crate::stages::reproject::Reproject;
@@ -32,6 +33,20 @@ pub struct BuildOptions {
     pub strict: bool,
     /// Draw progress bars (on a terminal).
     pub progress: bool,
+    /// Frames kept prepared (decoded, resized, back-projected) for their next samples; 0 prepares each
+    /// unit's frame anew. Memory: about 1 MB per frame at the working size 256. (`build` only: labels
+    /// read their windows' frames once each anyway.)
+    pub frame_cache: usize,
+}
+
+impl BuildOptions {
+    /// Frames kept by default: enough for the frames in flight on every worker thread.
+    pub const FRAME_CACHE: usize = 16;
+
+    /// One worker of one, building into `out`: not strict, no progress bars, the default frame cache.
+    pub fn into_folder(out: impl Into<PathBuf>) -> Self {
+        BuildOptions { out: out.into(), worker: 0, workers: 1, strict: false, progress: false, frame_cache: Self::FRAME_CACHE }
+    }
 }
 
 /// What a build did.
@@ -48,6 +63,9 @@ pub struct BuildReport {
     pub committed_now: Vec<u64>,
     /// Rows committed by this run, by status.
     pub rows_by_status: BTreeMap<String, u64>,
+    /// Frames this run prepared (decoded, resized, back-projected): once per frame with the frame
+    /// cache, once per unit without it.
+    pub frames_prepared: u64,
     pub summary: RunSummary,
 }
 
@@ -78,7 +96,8 @@ pub fn run_build(config: &BuildConfig, opts: &BuildOptions, cancel: &CancelToken
             PairUnit::new(u, fi, si, unit_seed(seed, &f.key, si as u64), f.scene.clone(), f.key.clone())
         })
     };
-    let stages = build_stages(config, &identity.content_hash, catalog, opts.strict, rayon::current_num_threads())?;
+    let frames = Arc::new(FrameCache::new(opts.frame_cache));
+    let stages = build_stages(config, &identity.content_hash, catalog, frames.clone(), opts.strict, rayon::current_num_threads())?;
     let mut sink = ShardSink::new(&dataset, config.shard_size, total_units, todo);
     let summary = run_pipeline(units, stages, &mut sink, todo_units, opts.progress, cancel)?;
     Ok(BuildReport {
@@ -89,6 +108,7 @@ pub fn run_build(config: &BuildConfig, opts: &BuildOptions, cancel: &CancelToken
         already_committed: (owned.len() - sink.shards.len()) as u64,
         committed_now: sink.committed.clone(),
         rows_by_status: sink.rows_by_status.clone(),
+        frames_prepared: frames.made(),
         summary,
     })
 }
@@ -96,7 +116,14 @@ pub fn run_build(config: &BuildConfig, opts: &BuildOptions, cancel: &CancelToken
 /// The stages of the build pipeline, in order, each replicated over `threads` workers (a unit's work
 /// is a few milliseconds, so parallelism across units is what fills the cores; the sink restores unit
 /// order within each shard).
-fn build_stages(config: &BuildConfig, content_hash: &str, catalog: Arc<Catalog>, strict: bool, threads: usize) -> Result<Vec<StageSpec<PairUnit>>> {
+fn build_stages(
+    config: &BuildConfig,
+    content_hash: &str,
+    catalog: Arc<Catalog>,
+    frames: Arc<FrameCache<PreparedFrame>>,
+    strict: bool,
+    threads: usize,
+) -> Result<Vec<StageSpec<PairUnit>>> {
     let w = &config.working;
     let n = threads;
     let mut inpainters = (0..n).map(|_| config.inpaint.build()).collect::<Result<Vec<_>>>()?.into_iter();
@@ -113,7 +140,7 @@ fn build_stages(config: &BuildConfig, content_hash: &str, catalog: Arc<Catalog>,
     }
     .into_iter();
     let mut stages = vec![
-        StageSpec::replicated(n, || Ingest { catalog: catalog.clone(), working: w.clone(), strict }),
+        StageSpec::replicated(n, || Ingest { catalog: catalog.clone(), working: w.clone(), strict, frames: frames.clone() }),
         StageSpec::replicated(n, || {
             config.pose.build(&config.correct.condition, w.depth_range(), w.crop_box, config.voxelize.voxel, config.validate.radius)
         }),

@@ -2,9 +2,10 @@
 //! the `[working]` config section (resolution, intrinsics map, depth range, crop box) that every later
 //! stage also reads.
 
+use super::frame_cache::FrameCache;
 use super::PairUnit;
 use crate::error::{Error, Result};
-use crate::geometry::{backproject, AxisBox, DepthMap, DepthRange, Intrinsics, ResizeCrop};
+use crate::geometry::{backproject, AxisBox, DepthMap, DepthRange, Intrinsics, Point, ResizeCrop};
 use crate::runtime::Stage;
 use crate::shards::row::Status;
 use crate::sources::{Catalog, Frame};
@@ -81,26 +82,42 @@ impl WorkingConfig {
     }
 }
 
-/// Decodes frames; bad input becomes an `input_error` unit (or a fatal error under `--strict`).
+/// A frame as every sample of it starts: decoded, at the working resolution, back-projected.
+pub struct PreparedFrame {
+    source_path: String,
+    source_hash: String,
+    depth: DepthMap,
+    k: Intrinsics,
+    memory: Vec<Point>,
+}
+
+/// Decodes frames; bad input becomes an `input_error` unit (or a fatal error under `--strict`). The
+/// workers share `frames`, so a frame's samples decode it once.
 pub struct Ingest {
     pub catalog: Arc<Catalog>,
     pub working: WorkingConfig,
     pub strict: bool,
+    pub frames: Arc<FrameCache<PreparedFrame>>,
 }
 
 impl Ingest {
-    fn prepare(&self, unit: &mut PairUnit) -> Result<()> {
-        let frame = self.catalog.load(unit.frame_index)?;
-        unit.source_path = frame.depth_path.display().to_string();
-        unit.source_hash = frame.content_hash.clone();
+    fn prepare_frame(&self, index: usize) -> Result<PreparedFrame> {
+        let frame = self.catalog.load(index)?;
         let (depth, k) = self.working.map_frame(&frame)?;
         let memory = self.working.crop_box.crop(&backproject(&depth, &k, self.working.depth_range()));
         if memory.is_empty() {
             return Err(Error::input(&frame.depth_path, "depth map has no valid pixel inside the depth range and crop box"));
         }
-        unit.k = Some(k);
-        unit.source_depth = Some(depth);
-        unit.memory = memory;
+        Ok(PreparedFrame { source_path: frame.depth_path.display().to_string(), source_hash: frame.content_hash, depth, k, memory })
+    }
+
+    fn prepare(&self, unit: &mut PairUnit) -> Result<()> {
+        let f = self.frames.get(unit.frame_index, || self.prepare_frame(unit.frame_index))?;
+        unit.source_path = f.source_path.clone();
+        unit.source_hash = f.source_hash.clone();
+        unit.k = Some(f.k);
+        unit.source_depth = Some(f.depth.clone());
+        unit.memory = f.memory.clone();
         Ok(())
     }
 }

@@ -1,10 +1,11 @@
 //! The build pipeline's operators, one file each: thin adapters from the pure functions of
 //! `geometry`, `correction` and `inpainting` to the runtime's [`Stage`](crate::runtime::Stage) trait.
 //!
-//! ingest → pose → reproject → correct(condition) → inpaint → correct(output) → [successive] → voxelize →
+//! ingest (with the frame cache its workers share) → pose → reproject → correct(condition) → inpaint → correct(output) → [successive] → voxelize →
 //! validate → pack → sink (successive only when a pair has several target views)
 
 pub mod correct;
+pub mod frame_cache;
 pub mod ingest;
 pub mod inpaint;
 pub mod pack;

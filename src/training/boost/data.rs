@@ -166,7 +166,7 @@ pub fn generator_config(
 
 /// Builds (or resumes) the dataset of `config` in `out` and returns its `ok` pairs in unit order.
 pub fn generated_pairs(config: &BuildConfig, out: &Path, progress: bool) -> Result<Vec<OverlapPair>> {
-    let opts = BuildOptions { out: out.to_path_buf(), worker: 0, workers: 1, strict: false, progress };
+    let opts = BuildOptions { progress, ..BuildOptions::into_folder(out) };
     run_build(config, &opts, &CancelToken::new())?;
     let mut rows = Dataset::open(out)?.read_pairs()?;
     rows.sort_by_key(|r| r.unit_index);
