@@ -1,7 +1,11 @@
 //! The registration instrument against independent computations: normals and FPFH against Open3D on the
-//! same points, RANSAC + FPFH registration recall against Open3D's own pipeline on real single-frame
-//! pairs, the official error against a hand-computed pair, gt.log / gt.info written and read back, the
-//! fragments of a synthetic sequence against its known poses, and the same table on 1 and 2 threads.
+//! same points; the estimator (voxel grid, FPFH, matching, RANSAC, through `evaluate`) on fragments of an
+//! analytic surface at known non-identity poses, with controls that must fail there (the identity,
+//! index-to-index matching, the truth off by a known vector); registration recall on real single-frame
+//! pairs against Open3D's own pipeline (ours registers most of the pairs Open3D registers); the official
+//! error against a hand-computed pair; the protocol's arithmetic (IR, FMR, RR, RRE / RTE, the paired
+//! difference) on a hand-made benchmark; gt.log / gt.info written and read back; the fragments of a
+//! synthetic sequence against its known poses; and the same table on 1 and 2 threads.
 
 mod support;
 
@@ -279,7 +283,9 @@ fn csv_rows(text: &str, header: &str) -> Vec<Vec<String>> {
 /// RRE and RTE of every pair follow from D and are computed here; then FMR, the mean IR, RR (consecutive 3DMatch fragments left out, not in
 /// 3DLoMatch), RRE / RTE over the registered pairs that count, and the paired IR difference against a
 /// descriptor that matches everything to the first target point (FPFH with a radius below the voxel:
-/// every histogram empty).
+/// every histogram empty). The true poses here are the identity, so this checks the protocol's
+/// arithmetic, not the estimator:
+/// `ransac_fpfh_registers_fragments_at_known_non_identity_poses_and_rejects_the_controls` does that.
 #[test]
 fn eval_registration_on_a_hand_made_benchmark_equals_an_independent_computation() {
     let dir = tempfile::tempdir().unwrap();
@@ -440,30 +446,233 @@ fn eval_registration_on_a_hand_made_benchmark_equals_an_independent_computation(
     }
 }
 
-/// The two-sided p-value of the exact sign test: `a` successes against `b` under a fair coin.
-fn sign_test(a: usize, b: usize) -> f64 {
-    let n = a + b;
-    let tail: f64 = (0..=a.min(b)).map(|k| (0..k).fold(1.0, |c, x| c * (n - x) as f64 / (x + 1) as f64) / 2f64.powi(n as i32)).sum();
-    (2.0 * tail).min(1.0)
+/// A small linear congruential generator for the test's own draws (independent of `pointreggpt::rng`).
+struct Lcg(u64);
+
+impl Lcg {
+    /// Uniform in [0, 1).
+    fn next(&mut self) -> f64 {
+        self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (self.0 >> 11) as f64 / (1u64 << 53) as f64
+    }
 }
 
-#[test]
-fn sign_test_by_hand() {
-    assert_eq!(sign_test(0, 0), 1.0);
-    assert!((sign_test(0, 5) - 2.0 / 32.0).abs() < 1e-12);
-    assert!((sign_test(9, 1) - 2.0 * 11.0 / 1024.0).abs() < 1e-12);
-    assert!((sign_test(3, 3) - 1.0).abs() < 1e-12);
+/// The official error written out here from its definition: `x = [t, q_xyz]` of `Δ = inv(gt)·est` with
+/// the quaternion's w ≥ 0, `xᵀ·Info·x / Info₀₀`.
+fn official_error(gt: &Isometry3<f64>, est: &Isometry3<f64>, info: &Matrix6<f64>) -> f64 {
+    let d = gt.inverse() * est;
+    let q = d.rotation.quaternion();
+    let s = if q.w < 0.0 { -1.0 } else { 1.0 };
+    let x = nalgebra::Vector6::new(d.translation.x, d.translation.y, d.translation.z, s * q.i, s * q.j, s * q.k);
+    (x.transpose() * info * x)[(0, 0)] / info[(0, 0)]
 }
 
+/// `Σ Gᵀ·G` with `G = [I | −2·[p]×]` over `points` (Choi et al.).
+fn information_of(points: &[Point]) -> Matrix6<f64> {
+    let mut info = Matrix6::zeros();
+    for p in points {
+        let p = p.cast::<f64>();
+        let mut g = nalgebra::Matrix3x6::zeros();
+        g.fixed_view_mut::<3, 3>(0, 0).copy_from(&nalgebra::Matrix3::identity());
+        g.fixed_view_mut::<3, 3>(0, 3).copy_from(&(-2.0 * p.coords.cross_matrix()));
+        info += g.transpose() * g;
+    }
+    info
+}
+
+/// The analytic scene of the posed benchmark: a height field `z = 2 + h(x, y)` in the world frame, a
+/// gentle slope plus 40 Gaussian bumps and dents (4-12 cm wide, 3-10 cm high) at drawn places, so
+/// neighbourhoods 12.5 cm across differ.
+fn bumpy_height(seed: u64) -> impl Fn(f64, f64) -> f64 {
+    let mut rng = Lcg(seed);
+    let bumps: Vec<[f64; 4]> = (0..40)
+        .map(|_| {
+            let (cx, cy) = (rng.next() * 1.8 - 0.9, rng.next() * 1.4 - 0.7);
+            let w = 0.04 + 0.08 * rng.next();
+            let a = (0.03 + 0.07 * rng.next()) * if rng.next() < 0.5 { -1.0 } else { 1.0 };
+            [cx, cy, w, a]
+        })
+        .collect();
+    move |x, y| {
+        let bump = |[cx, cy, w, a]: &[f64; 4]| a * (-((x - cx).powi(2) + (y - cy).powi(2)) / (w * w)).exp();
+        0.08 * x - 0.05 * y + bumps.iter().map(bump).sum::<f64>()
+    }
+}
+
+/// A registration benchmark at known non-identity poses that the estimator must solve, and controls
+/// that must fail on it. Four fragments of the analytic height field (`bumpy_height`), each the part of
+/// the field under its own window, sampled on a 1 cm grid, expressed in its own camera frame `P_k` and
+/// written with its points shuffled (the six pairs: turns of 47° to 145°, shifts of 0.33 to 0.71 m,
+/// overlaps of 38 to 80 %); gt.log states `inv(P_i)·P_j` and gt.info the information matrix of the
+/// source points whose world position lies under the target's window (both from the construction).
+///
+/// The real pipeline (`evaluate`: voxel grid, normals, FPFH, matching, RANSAC, the official error, the
+/// same code as `eval registration`) must register all six pairs with an error below a tenth of the
+/// bar and RRE below 5° (measured: errors at most 1.2e-4 against the bar 0.04, RRE at most 2.2°).
+/// Controls built here, scored with the protocol's error and with the one written out in the test,
+/// must be rejected on every pair: the identity (a RANSAC that returns it), RANSAC and Kabsch on
+/// index-to-index correspondences (a matcher that pairs by index, in the written and in the
+/// voxel-downsampled order), and the truth with its translation off by a known vector δ (whose error
+/// is exactly |δ|², just over the bar; half of δ passes).
 #[test]
-fn ransac_fpfh_registration_recall_matches_open3d_on_real_single_frames() {
+fn ransac_fpfh_registers_fragments_at_known_non_identity_poses_and_rejects_the_controls() {
+    use pointreggpt::registration::metrics::RR_ERROR;
+    use pointreggpt::registration::ransac::{kabsch, ransac, RansacConfig};
+    use pointreggpt::registration::{evaluate, Descriptor, EvalConfig};
+    let t0 = std::time::Instant::now();
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path();
+    let h = bumpy_height(7);
+    // Per fragment: the world window (x0, x1, y0, y1) and the camera pose P_k (camera to world).
+    let fragments: [([f64; 4], Isometry3<f64>); 4] = [
+        ([-0.85, 0.25, -0.65, 0.35], Isometry3::new(Vector3::new(0.1, -0.05, 0.0), Vector3::new(0.05, -0.1, 0.3))),
+        ([-0.45, 0.55, -0.40, 0.60], Isometry3::new(Vector3::new(-0.2, 0.1, 0.15), Vector3::new(-0.15, 0.1, -0.5))),
+        ([-0.15, 0.85, -0.60, 0.40], Isometry3::new(Vector3::new(0.3, 0.2, -0.1), Vector3::new(0.1, 0.2, 1.2))),
+        ([-0.60, 0.40, -0.25, 0.65], Isometry3::new(Vector3::new(-0.1, -0.3, 0.2), Vector3::new(-0.2, -0.1, -1.3))),
+    ];
+    let inside = |w: &[f64; 4], x: f64, y: f64| x >= w[0] && x < w[1] && y >= w[2] && y < w[3];
+    // World points of each fragment (1 cm grid), and the same in the fragment's frame, shuffled.
+    let mut world: Vec<Vec<Point>> = Vec::new();
+    let mut local: Vec<Vec<Point>> = Vec::new();
+    let mut rng = Lcg(99);
+    for (w, pose) in &fragments {
+        let mut pts = Vec::new();
+        for ix in (w[0] * 100.0).round() as i64..(w[1] * 100.0).round() as i64 {
+            for iy in (w[2] * 100.0).round() as i64..(w[3] * 100.0).round() as i64 {
+                let (x, y) = (ix as f64 / 100.0 + 0.005, iy as f64 / 100.0 + 0.005);
+                pts.push(Point::new(x as f32, y as f32, (2.0 + h(x, y)) as f32));
+            }
+        }
+        for a in (1..pts.len()).rev() {
+            pts.swap(a, (rng.next() * (a + 1) as f64) as usize);
+        }
+        let inv = pose.inverse();
+        local.push(pts.iter().map(|p| (inv * p.cast::<f64>()).cast::<f32>()).collect());
+        world.push(pts);
+    }
+    std::fs::create_dir_all(root.join("posed")).unwrap();
+    for (k, pts) in local.iter().enumerate() {
+        pointreggpt::ply::write_points(&root.join(format!("posed/cloud_bin_{k}.ply")), pts).unwrap();
+    }
+    let mut truths = std::collections::BTreeMap::new();
+    let (mut log, mut inf) = (String::new(), String::new());
+    for i in 0..4 {
+        for j in i + 1..4 {
+            let truth = fragments[i].1.inverse() * fragments[j].1;
+            let under_i = |p: &&Point| inside(&fragments[i].0, p.x as f64, p.y as f64);
+            let overlap: Vec<Point> = world[j].iter().zip(&local[j]).filter(|(p, _)| under_i(p)).map(|(_, q)| *q).collect();
+            let share = overlap.len() as f64 / local[j].len() as f64;
+            assert!((0.25..0.9).contains(&share), "pair {i} {j}: overlap {share}");
+            let (turn, shift) = (truth.rotation.angle().to_degrees(), truth.translation.vector.norm());
+            println!("pair {i} {j}: truth turns {turn:.1} deg and shifts {shift:.3} m, overlap {share:.2}");
+            let info = information_of(&overlap);
+            log.push_str(&format!("{i} {j} 4\n{}", rows4(&truth)));
+            inf.push_str(&format!("{i} {j} 4\n"));
+            for r in 0..6 {
+                inf.push_str(&(0..6).map(|c| format!("{:.17e}", info[(r, c)])).collect::<Vec<_>>().join(" "));
+                inf.push('\n');
+            }
+            truths.insert((i, j), (truth, info));
+        }
+    }
+    let d = root.join("metadata/benchmarks/posed/posed");
+    std::fs::create_dir_all(&d).unwrap();
+    std::fs::write(d.join("gt.log"), log).unwrap();
+    std::fs::write(d.join("gt.info"), inf).unwrap();
+
+    // The controls, scored with the protocol's error and with the one written out here.
+    let rejected = |what: &str, i: usize, j: usize, est: &Isometry3<f64>| {
+        let (truth, info) = &truths[&(i, j)];
+        let (ours, theirs) = (official_error(truth, est, info), registration_error(truth, est, info));
+        assert!((ours - theirs).abs() <= 1e-9 * ours.max(1.0), "pair {i} {j}, {what}: error {theirs} vs {ours} written out");
+        assert!(
+            ours > RR_ERROR,
+            "pair {i} {j}: the control `{what}` has error {ours} <= {RR_ERROR}, so the benchmark cannot tell it from a registration"
+        );
+        ours
+    };
+    let delta = Vector3::new(0.15, -0.12, 0.1);
+    let vectors = |pts: &[Point]| pts.iter().map(|p| p.coords.cast::<f64>()).collect::<Vec<_>>();
+    let index_ransac = |s: &[Point], t: &[Point]| {
+        let corr: Vec<(u32, u32)> = (0..s.len().min(t.len()) as u32).map(|k| (k, k)).collect();
+        ransac(s, t, &corr, &RansacConfig::default()).map(|r| r.t_target_from_source)
+    };
+    let mut worst_control = f64::MAX;
+    for (&(i, j), (truth, info)) in &truths {
+        let mut errors = vec![rejected("identity", i, j, &Isometry3::identity())];
+        let (ds, dt) = (voxel_downsample(&local[j], VOXEL as f32), voxel_downsample(&local[i], VOXEL as f32));
+        for (name, s, t) in [("written order", &local[j], &local[i]), ("voxel order", &ds, &dt)] {
+            let n = s.len().min(t.len());
+            let k = kabsch(&vectors(&s[..n]), &vectors(&t[..n])).unwrap();
+            errors.push(rejected(&format!("Kabsch on same-index points, {name}"), i, j, &k));
+            if let Some(r) = index_ransac(s, t) {
+                errors.push(rejected(&format!("RANSAC on same-index matches, {name}"), i, j, &r));
+            }
+        }
+        // The truth off by δ in the target frame: Δ = inv(T)·(δ + T) is the pure shift Rᵀ·δ, so the error
+        // is |δ|² (Info's top-left block is n·I); half of δ is within the bar.
+        let off = Translation3::from(delta) * truth;
+        let e = rejected("the truth shifted by δ", i, j, &off);
+        assert!((e - delta.norm_squared()).abs() < 1e-9, "pair {i} {j}: shift error {e}, |δ|² = {}", delta.norm_squared());
+        let half = Translation3::from(delta / 2.0) * truth;
+        assert!(official_error(truth, &half, info) <= RR_ERROR, "pair {i} {j}: half of δ is rejected too");
+        worst_control = worst_control.min(errors.iter().copied().fold(f64::MAX, f64::min));
+        println!("pair {i} {j}: control errors {errors:.3?}, shift by δ {e:.4}");
+    }
+    let t_build = t0.elapsed().as_secs_f64();
+
+    // The real estimator through the protocol.
+    let t1 = std::time::Instant::now();
+    let config = EvalConfig { samples: vec![5000], ..Default::default() };
+    let benches = find_benchmarks(root).unwrap();
+    assert_eq!(benches.len(), 1);
+    let fpfh = [Descriptor::parse("fpfh", "--descriptor").unwrap()];
+    let scores = evaluate(&benches[0], &fpfh, &config, &mut || {}).unwrap().remove(0);
+    assert_eq!(scores.len(), 6);
+    for s in &scores {
+        println!("pair {} {}: IR {:.3}, error {:.2e}, RRE {:.3} deg, RTE {:.4} m", s.i, s.j, s.inlier_ratio, s.error, s.rre_deg, s.rte_m);
+    }
+    let t_pipeline = t1.elapsed().as_secs_f64();
+    println!("{t_build:.1} s to build the benchmark and its controls, {t_pipeline:.1} s for the pipeline; smallest control error {worst_control:.4}");
+    for s in &scores {
+        let (truth, _) = &truths[&(s.i, s.j)];
+        let turn = truth.rotation.angle().to_degrees();
+        let shift = truth.translation.vector.norm();
+        assert!(turn > 40.0 && shift > 0.3, "pair {} {}: the truth is too near the identity ({turn} deg, {shift} m)", s.i, s.j);
+        assert!(
+            s.registered && s.error < RR_ERROR / 10.0 && s.rre_deg < 5.0,
+            "pair {} {} (truth: {turn:.0} deg, {shift:.2} m) not registered within a tenth of the bar and 5°: error {} \
+             (bar {RR_ERROR}), RRE {} deg, RTE {} m, IR {}",
+            s.i,
+            s.j,
+            s.error,
+            s.rre_deg,
+            s.rte_m,
+            s.inlier_ratio
+        );
+    }
+}
+
+/// The least share of the pairs Open3D registers that ours must register too. Measured (27 pairs, 5000
+/// samples, three runs): ours 21; Open3D 20 or 21 (its RANSAC varies from run to run), of which ours
+/// registers 20 (95-100 %). 80 % leaves room for Open3D's streams; a pipeline that registers nothing or
+/// only a few fails (RANSAC returning the identity registers 1).
+const SHARE_OF_OPEN3D: f64 = 0.8;
+/// The least number of pairs Open3D must register for the share to mean something (measured: 20-21 of 27).
+const MIN_OPEN3D_REGISTERED: usize = 12;
+
+/// Registration recall of our RANSAC + FPFH against Open3D's own pipeline on real single-frame pairs of
+/// 7-Scenes: ours must register at least [`SHARE_OF_OPEN3D`] of the very pairs Open3D registers, and
+/// Open3D at least [`MIN_OPEN3D_REGISTERED`], so a pipeline that registers nothing fails.
+#[test]
+fn ransac_fpfh_registers_most_of_the_real_pairs_open3d_registers() {
     use pointreggpt::registration::{evaluate, Descriptor, EvalConfig};
     let Some(real) = real_data() else { return };
     let dir = tempfile::tempdir().unwrap();
     let bench = dir.path().join("bench");
     let seq = real.join("7scenes-redkitchen");
     let b = bench.to_str().unwrap();
-    // Gaps of 40-100 frames: overlaps from 20 to 80 %, so RR is off its ceiling (about 80 %) and can disagree.
+    // Gaps of 40-100 frames: overlaps from 20 to 80 %, so not every pair is easy (Open3D registers about 3 in 4).
     run(&["fragments", seq.to_str().unwrap(), "--single-frames", "--first", "0", "--frames", "200", "--every", "15", "--gaps", "40,70,100", "--out", b, "--quiet"]);
     // Ours, pair by pair, with the settings of `eval registration --samples 5000` (the same code).
     let t0 = std::time::Instant::now();
@@ -488,17 +697,21 @@ fn ransac_fpfh_registration_recall_matches_open3d_on_real_single_frames() {
     assert_eq!(ours.keys().collect::<Vec<_>>(), theirs.keys().collect::<Vec<_>>(), "not the same pairs");
     let pairs = ours.len();
     let (n_ours, n_theirs) = (ours.values().filter(|r| **r).count(), theirs.values().filter(|r| **r).count());
-    // A paired comparison: only the pairs one pipeline registers and the other does not tell them apart.
-    // With equal recall, each such pair goes either way with probability 1/2; the exact sign test over
-    // them fails the test at the 1 % level.
+    let both = ours.iter().filter(|(k, r)| **r && theirs[*k]).count();
     let only_ours = ours.iter().filter(|(k, r)| **r && !theirs[*k]).count();
-    let only_theirs = ours.iter().filter(|(k, r)| !**r && theirs[*k]).count();
-    let p = sign_test(only_ours, only_theirs);
     println!(
-        "RR on {pairs} real single-frame pairs: ours {n_ours}, Open3D {n_theirs}; registered by ours only {only_ours}, \
-         by Open3D only {only_theirs}, sign test p = {p:.3} ({ours_s:.1} s for ours, description included)"
+        "RR on {pairs} real single-frame pairs: ours {n_ours}, Open3D {n_theirs}; registered by both {both}, by ours only \
+         {only_ours}, by Open3D only {} ({ours_s:.1} s for ours, description included)",
+        n_theirs - both
     );
     assert!(pairs >= 20, "{pairs} pairs");
-    assert!(n_theirs >= pairs / 4 && n_theirs < pairs, "Open3D registers {n_theirs} of {pairs}: RR on its ceiling or floor compares nothing");
-    assert!(p >= 0.01, "ours registers {n_ours} and Open3D {n_theirs} of {pairs} pairs; {only_ours} vs {only_theirs} discordant pairs, p = {p:.4}");
+    assert!(
+        n_theirs >= MIN_OPEN3D_REGISTERED,
+        "Open3D registers {n_theirs} of {pairs} pairs, fewer than {MIN_OPEN3D_REGISTERED}: the comparison says nothing"
+    );
+    assert!(
+        both as f64 >= SHARE_OF_OPEN3D * n_theirs as f64,
+        "ours registers {both} of the {n_theirs} pairs Open3D registers (below {:.0} %; ours {n_ours} of {pairs} in all)",
+        100.0 * SHARE_OF_OPEN3D
+    );
 }
