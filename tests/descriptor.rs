@@ -361,20 +361,21 @@ fn known_positives_draws_positives_only_on_reprojected_points_and_changes_nothin
     let pairs = load_pairs(std::slice::from_ref(&data)).unwrap();
     let (summary, base) = traced(&data, dir.path(), "base", &[]);
     let (summary_known, known) = traced(&data, dir.path(), "known", &["--known-positives"]);
+    // Both runs see the stored clouds (so the target indices below index the stored target).
+    for run in [&base, &known] {
+        sources_as_stored(run, &pairs, "--known-positives");
+        targets_as_stored(run, &pairs, "--known-positives");
+    }
     // The negative control: without the option, filled points become positives on this data.
     let before = filled_positives(&base, &pairs);
     eprintln!("positives on filled points: {before} of {} without --known-positives", base.len() * TRACE_POINTS);
     assert!(before > 0, "the data gives the option nothing to change");
     assert_eq!(filled_positives(&known, &pairs), 0, "--known-positives drew positives on filled points");
-    // Nothing else: the same summary and pairs, both clouds as stored, and the same draws with the filled
-    // partners skipped (the candidates come in the same order, so the base run's positives on known points
-    // are the first ones of the known-positives run).
+    // Nothing else: the same summary and pairs, both clouds as stored (above), and the same draws with the
+    // filled partners skipped (the candidates come in the same order, so the base run's positives on known
+    // points are the first ones of the known-positives run).
     assert_eq!(summary, summary_known);
     assert_eq!(first_draws(&base), first_draws(&known));
-    for run in [&base, &known] {
-        sources_as_stored(run, &pairs, "--known-positives");
-        targets_as_stored(run, &pairs, "--known-positives");
-    }
     for (b, k) in base.iter().zip(&known).filter(|(b, _)| b.slot == 0) {
         let kept: Vec<(usize, usize)> = b.source.iter().copied().zip(b.target.iter().copied()).filter(|&(_, t)| pairs[b.pair].target_known[t] >= 0.5).collect();
         let drawn: Vec<(usize, usize)> = k.source.iter().copied().zip(k.target.iter().copied()).collect();
