@@ -205,15 +205,15 @@ fn resume_continues_exactly_and_bad_input_is_refused() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(String::from_utf8_lossy(&o.stdout).contains(&format!("{} training pairs", pairs.unwrap())), "{}", String::from_utf8_lossy(&o.stdout));
 
-    // Real + generated at a ratio, trained by exposure with the generated pairs' known-point rules and
-    // noise: the counts are the bench's pairs and at most twice as many of the dataset's ok rows (counted
-    // here), and the step count follows the epochs.
+    // Real + generated at a ratio, trained by exposure: the counts are the bench's pairs and at most twice
+    // as many of the dataset's ok rows (counted here), and the step count follows the epochs. (What the
+    // trainer options change is tested one option at a time with --trace-batches, below.)
     let real = pairs.unwrap();
     let generated = pointreggpt::shards::dataset::Dataset::open(&data).unwrap().read_pairs().unwrap().iter().filter(|r| r.status == pointreggpt::shards::Status::Ok).count();
     let mix = dir.path().join("mix");
     let o = bin()
         .args(["train", "descriptor", "--data", bench.to_str().unwrap(), "--data", data.to_str().unwrap(), "--out", mix.to_str().unwrap(), "--quiet"])
-        .args(["--generated-ratio", "2", "--epochs", "1.5", "--known-positives", "--drop-filled", "--noise", "0.005", "--rotation", "10", "--points", "16"])
+        .args(["--generated-ratio", "2", "--epochs", "1.5", "--points", "16"])
         .output()
         .unwrap();
     let stdout = String::from_utf8_lossy(&o.stdout);
@@ -270,4 +270,235 @@ fn describing_only_the_sampled_points_gives_the_same_scores() {
             assert!((full.row(k)[c] - some.row(r)[c]).abs() < 1e-5, "point {k} component {c}: {} vs {}", full.row(k)[c], some.row(r)[c]);
         }
     }
+}
+
+// ---- What each trainer option changes, seen through `--trace-batches` ----
+//
+// Each test trains twice from the same seed, with and without one option, for a few steps, and compares
+// what the command fed the network (the trace) with the stored pairs (`load_pairs`, read here): what the
+// option must change did, and nothing else did.
+
+/// Steps, pairs per step and points per pair of the traced runs (small: a run takes a few seconds).
+const TRACE_STEPS: u64 = 3;
+const TRACE_PAIRS: usize = 3;
+const TRACE_POINTS: usize = 32;
+
+/// One line of `--trace-batches`.
+#[derive(serde::Deserialize, Debug, Clone, PartialEq)]
+struct Drawn {
+    step: u64,
+    slot: usize,
+    pair: usize,
+    key: String,
+    source_points: usize,
+    target_points: usize,
+    source: Vec<usize>,
+    target: Vec<usize>,
+    source_xyz: Vec<[f32; 3]>,
+    target_xyz: Vec<[f32; 3]>,
+}
+
+/// A traced run on `data` with `options`, named `name` under `dir`: the summary line and the trace.
+/// Checks what every run must show: each step drew --pairs-per-step pairs of --points partners.
+fn traced(data: &Path, dir: &Path, name: &str, options: &[&str]) -> (String, Vec<Drawn>) {
+    let trace = dir.join(format!("{name}.jsonl"));
+    let (pairs, points) = (TRACE_PAIRS.to_string(), TRACE_POINTS.to_string());
+    let mut args = vec!["--seed", "3", "--pairs-per-step", &pairs, "--points", &points, "--trace-batches", trace.to_str().unwrap()];
+    args.extend_from_slice(options);
+    let o = train(data, &dir.join(name), TRACE_STEPS, &args);
+    assert!(o.status.success(), "{options:?}: {}", String::from_utf8_lossy(&o.stderr));
+    let drawn: Vec<Drawn> = std::fs::read_to_string(&trace).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    let slots: Vec<(u64, usize)> = drawn.iter().map(|d| (d.step, d.slot)).collect();
+    let expected: Vec<(u64, usize)> = (1..=TRACE_STEPS).flat_map(|s| (0..TRACE_PAIRS).map(move |k| (s, k))).collect();
+    assert_eq!(slots, expected, "{options:?}: every step draws --pairs-per-step pairs");
+    for d in &drawn {
+        assert!(d.source.len() == TRACE_POINTS && d.target.len() == TRACE_POINTS, "{options:?}: --points partners per pair: {d:?}");
+        assert!(d.source_xyz.len() == TRACE_POINTS && d.target_xyz.len() == TRACE_POINTS);
+    }
+    let stdout = String::from_utf8_lossy(&o.stdout).into_owned();
+    (stdout.lines().next().unwrap_or_default().to_string(), drawn)
+}
+
+fn xyz(p: &pointreggpt::geometry::Point) -> [f32; 3] {
+    [p.x, p.y, p.z]
+}
+
+/// The pairs drawn first in each step (drawn before anything an option changes).
+fn first_draws(drawn: &[Drawn]) -> Vec<(u64, usize)> {
+    drawn.iter().filter(|d| d.slot == 0).map(|d| (d.step, d.pair)).collect()
+}
+
+/// Asserts the trace's source clouds are the stored ones: size, and the drawn points' coordinates.
+fn sources_as_stored(drawn: &[Drawn], pairs: &[TrainPair], what: &str) {
+    for d in drawn {
+        let p = &pairs[d.pair];
+        assert_eq!(d.key, p.key);
+        assert_eq!(d.source_points, p.source.len(), "{what}: the source cloud of {}", d.key);
+        let stored: Vec<[f32; 3]> = d.source.iter().map(|&i| xyz(&p.source[i])).collect();
+        assert_eq!(d.source_xyz, stored, "{what}: source coordinates of {}", d.key);
+    }
+}
+
+/// Asserts the trace's target clouds are the stored ones.
+fn targets_as_stored(drawn: &[Drawn], pairs: &[TrainPair], what: &str) {
+    for d in drawn {
+        let p = &pairs[d.pair];
+        assert_eq!(d.target_points, p.target.len(), "{what}: the target cloud of {}", d.key);
+        let stored: Vec<[f32; 3]> = d.target.iter().map(|&i| xyz(&p.target[i])).collect();
+        assert_eq!(d.target_xyz, stored, "{what}: target coordinates of {}", d.key);
+    }
+}
+
+/// Positives drawn on filled target points (stored `target_known_share` < 0.5), indices into the stored target.
+fn filled_positives(drawn: &[Drawn], pairs: &[TrainPair]) -> usize {
+    drawn.iter().map(|d| d.target.iter().filter(|&&k| pairs[d.pair].target_known[k] < 0.5).count()).sum()
+}
+
+#[test]
+fn known_positives_draws_positives_only_on_reprojected_points_and_changes_nothing_else() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dataset(dir.path(), "train", 11);
+    let pairs = load_pairs(std::slice::from_ref(&data)).unwrap();
+    let (summary, base) = traced(&data, dir.path(), "base", &[]);
+    let (summary_known, known) = traced(&data, dir.path(), "known", &["--known-positives"]);
+    // Both runs see the stored clouds (so the target indices below index the stored target).
+    for run in [&base, &known] {
+        sources_as_stored(run, &pairs, "--known-positives");
+        targets_as_stored(run, &pairs, "--known-positives");
+    }
+    // The negative control: without the option, filled points become positives on this data.
+    let before = filled_positives(&base, &pairs);
+    eprintln!("positives on filled points: {before} of {} without --known-positives", base.len() * TRACE_POINTS);
+    assert!(before > 0, "the data gives the option nothing to change");
+    assert_eq!(filled_positives(&known, &pairs), 0, "--known-positives drew positives on filled points");
+    // Nothing else: the same summary and pairs, both clouds as stored (above), and the same draws with the
+    // filled partners skipped (the candidates come in the same order, so the base run's positives on known
+    // points are the first ones of the known-positives run).
+    assert_eq!(summary, summary_known);
+    assert_eq!(first_draws(&base), first_draws(&known));
+    for (b, k) in base.iter().zip(&known).filter(|(b, _)| b.slot == 0) {
+        let kept: Vec<(usize, usize)> = b.source.iter().copied().zip(b.target.iter().copied()).filter(|&(_, t)| pairs[b.pair].target_known[t] >= 0.5).collect();
+        let drawn: Vec<(usize, usize)> = k.source.iter().copied().zip(k.target.iter().copied()).collect();
+        assert!(drawn.starts_with(&kept), "step {}: {kept:?} are not the first of {drawn:?}", b.step);
+    }
+}
+
+#[test]
+fn drop_filled_keeps_filled_points_out_of_the_clouds_and_changes_nothing_else() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dataset(dir.path(), "train", 11);
+    let pairs = load_pairs(std::slice::from_ref(&data)).unwrap();
+    let (summary, base) = traced(&data, dir.path(), "base", &[]);
+    let (summary_drop, dropped) = traced(&data, dir.path(), "drop", &["--drop-filled"]);
+    targets_as_stored(&base, &pairs, "without --drop-filled");
+    // The target clouds patches are made from hold exactly the re-projected points (counted here), and
+    // every drawn target point is one of them.
+    let mut fewer = 0;
+    for d in &dropped {
+        let p = &pairs[d.pair];
+        let known: std::collections::HashSet<[u32; 3]> =
+            p.target.iter().zip(&p.target_known).filter(|(_, &s)| s >= 0.5).map(|(q, _)| xyz(q).map(f32::to_bits)).collect();
+        assert_eq!(d.target_points, known.len(), "{}: target cloud of {} points, {} re-projected", d.key, d.target_points, known.len());
+        fewer += (d.target_points < p.target.len()) as usize;
+        for q in &d.target_xyz {
+            assert!(known.contains(&q.map(f32::to_bits)), "{}: {q:?} is no re-projected target point", d.key);
+        }
+    }
+    assert!(fewer > 0, "no drawn pair had a filled point to drop");
+    assert!(filled_positives(&base, &pairs) > 0, "the negative control: without the option filled points are drawn");
+    // Nothing else: the same summary and pairs, the sources as stored.
+    assert_eq!(summary, summary_drop);
+    assert_eq!(first_draws(&base), first_draws(&dropped));
+    sources_as_stored(&dropped, &pairs, "--drop-filled");
+    // --known-positives beside it changes nothing (no filled point is left to draw): the same trace.
+    let (_, both) = traced(&data, dir.path(), "both", &["--drop-filled", "--known-positives"]);
+    assert!(both == dropped, "--known-positives changed a --drop-filled run");
+}
+
+/// Per coordinate, the traced coordinates minus the stored ones at the same indices (both clouds).
+fn displacements(drawn: &[Drawn], pairs: &[TrainPair]) -> Vec<f64> {
+    let mut out = Vec::new();
+    for d in drawn {
+        let p = &pairs[d.pair];
+        assert_eq!((d.source_points, d.target_points), (p.source.len(), p.target.len()), "{}: the clouds keep their points", d.key);
+        for (idx, seen, cloud) in [(&d.source, &d.source_xyz, &p.source), (&d.target, &d.target_xyz, &p.target)] {
+            for (&i, q) in idx.iter().zip(seen) {
+                out.extend((0..3).map(|c| (q[c] - xyz(&cloud[i])[c]) as f64));
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn noise_moves_the_coordinates_by_the_stated_sigma_and_changes_nothing_else() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dataset(dir.path(), "train", 11);
+    let pairs = load_pairs(std::slice::from_ref(&data)).unwrap();
+    let (summary, base) = traced(&data, dir.path(), "base", &[]);
+    let sigma = 0.005;
+    let (summary_noise, noised) = traced(&data, dir.path(), "noise", &["--noise", &sigma.to_string()]);
+    assert!(displacements(&base, &pairs).iter().all(|&d| d == 0.0), "without --noise the coordinates are the stored ones");
+    let d = displacements(&noised, &pairs);
+    let mean = d.iter().sum::<f64>() / d.len() as f64;
+    let sd = (d.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / d.len() as f64).sqrt();
+    let worst = d.iter().fold(0f64, |m, v| m.max(v.abs()));
+    eprintln!("--noise {sigma}: {} coordinates moved by mean {mean:.5}, sd {sd:.5}, at most {worst:.5} m", d.len());
+    // 3 x 3 x 32 x 2 points x 3 coordinates = 1728 values: the sd is within ~2 % (one standard error) of
+    // sigma, the mean within ~2.4 % of it; 6 sigma bounds every value.
+    assert!((sd / sigma - 1.0).abs() < 0.1 && mean.abs() < 0.1 * sigma && worst < 6.0 * sigma, "--noise {sigma}: mean {mean}, sd {sd}, max {worst}");
+    // Nothing else: the same summary, the same pairs drawn first in each step with clouds of the same sizes
+    // (checked above), and mostly the same partners (noise moves a few across the 3.75 cm radius).
+    assert_eq!(summary, summary_noise);
+    assert_eq!(first_draws(&base), first_draws(&noised));
+    let (mut same, mut total) = (0, 0);
+    for (b, n) in base.iter().zip(&noised).filter(|(b, _)| b.slot == 0) {
+        total += b.source.len();
+        same += b.source.iter().filter(|i| n.source.contains(i)).count();
+    }
+    eprintln!("--noise {sigma}: {same} of {total} first-draw source points the same");
+    assert!(same as f64 >= 0.8 * total as f64, "{same} of {total} source points the same");
+}
+
+/// Angle in degrees between two vectors.
+fn angle_deg(a: [f32; 3], b: [f32; 3]) -> f64 {
+    let (a, b) = (nalgebra::Vector3::from(a).cast::<f64>(), nalgebra::Vector3::from(b).cast::<f64>());
+    (a.dot(&b) / (a.norm() * b.norm())).clamp(-1.0, 1.0).acos().to_degrees()
+}
+
+#[test]
+fn rotation_turns_each_cloud_by_at_most_the_stated_angle_and_changes_nothing_else() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dataset(dir.path(), "train", 11);
+    let pairs = load_pairs(std::slice::from_ref(&data)).unwrap();
+    let (summary, base) = traced(&data, dir.path(), "base", &[]);
+    let max_deg = 30.0;
+    let (summary_rot, turned) = traced(&data, dir.path(), "rotation", &["--rotation", &max_deg.to_string()]);
+    // Each cloud is turned about the camera's origin: the points keep their norms and their distances to
+    // each other (one rotation per cloud), and no point's direction turns by more than the angle.
+    let mut largest = 0f64;
+    for d in &turned {
+        let p = &pairs[d.pair];
+        for (idx, seen, cloud) in [(&d.source, &d.source_xyz, &p.source), (&d.target, &d.target_xyz, &p.target)] {
+            let stored: Vec<[f32; 3]> = idx.iter().map(|&i| xyz(&cloud[i])).collect();
+            let norm = |v: [f32; 3]| nalgebra::Vector3::from(v).norm();
+            let dist = |a: [f32; 3], b: [f32; 3]| (nalgebra::Vector3::from(a) - nalgebra::Vector3::from(b)).norm();
+            for (i, (&q, &s)) in seen.iter().zip(&stored).enumerate() {
+                assert!((norm(q) - norm(s)).abs() < 1e-4, "{}: |{q:?}| vs |{s:?}|", d.key);
+                let a = angle_deg(q, s);
+                assert!(a <= max_deg + 0.01, "{}: a point turned by {a:.3} degrees > {max_deg}", d.key);
+                largest = largest.max(a);
+                let j = (i + 1) % seen.len();
+                assert!((dist(q, seen[j]) - dist(s, stored[j])).abs() < 1e-4, "{}: the distance of two points changed", d.key);
+            }
+        }
+    }
+    eprintln!("--rotation {max_deg}: the most a drawn point turned: {largest:.2} degrees");
+    assert!(largest > 2.0, "--rotation {max_deg}: no point turned more than {largest} degrees");
+    // Nothing else: a rotation keeps the nearest neighbours, so the draws are the same (pairs, cloud sizes,
+    // partners), only the coordinates differ.
+    assert_eq!(summary, summary_rot);
+    let strip = |run: &[Drawn]| -> Vec<Drawn> { run.iter().map(|d| Drawn { source_xyz: vec![], target_xyz: vec![], ..d.clone() }).collect() };
+    assert_eq!(strip(&base), strip(&turned), "--rotation changed the draws");
+    sources_as_stored(&base, &pairs, "without --rotation");
 }

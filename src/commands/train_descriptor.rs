@@ -65,6 +65,12 @@ pub struct TrainDescriptorArgs {
     /// libtorch intra-op threads (see `train correction --help`).
     #[arg(long, default_value_t = 1)]
     pub torch_threads: i32,
+    /// Write what training drew to FILE, one JSON line per pair entering a step's loss: step, slot, pair
+    /// (index and key), the point counts of the two clouds its patches are made from (after --drop-filled),
+    /// the indices of the corresponding points drawn (`source`, `target`) and their coordinates as the
+    /// network sees them (`source_xyz`, `target_xyz`, after --noise and --rotation). For checking the options.
+    #[arg(long, value_name = "FILE")]
+    pub trace_batches: Option<PathBuf>,
 }
 
 /// How the descriptor trains on its pairs (shared with `eval boost`): exposure, the known-point rules of
@@ -76,7 +82,8 @@ pub struct DescriptorTrainingArgs {
     #[arg(long)]
     pub epochs: Option<f64>,
     /// Positives only on target points of generated pairs that were re-projected from the source
-    /// (target_known_share >= 0.5), never on filled ones. Real pairs are unaffected.
+    /// (target_known_share >= 0.5), never on filled ones. Real pairs are unaffected; beside --drop-filled it
+    /// changes nothing (no filled point is left to draw).
     #[arg(long)]
     pub known_positives: bool,
     /// Drop the filled target points of generated pairs (target_known_share < 0.5) before training, so
@@ -153,6 +160,7 @@ pub fn run(a: &TrainDescriptorArgs, out: &mut dyn Write) -> Result<()> {
     opts.seed = a.seed;
     opts.resume = a.resume;
     opts.progress = !a.quiet;
+    opts.trace = a.trace_batches.clone();
     opts.validate()?;
     let mut pairs = load_pairs(&a.data)?;
     if let Some(ratio) = a.generated_ratio {

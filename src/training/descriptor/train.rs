@@ -60,6 +60,10 @@ pub struct DescriptorTrainOptions {
     pub resume: bool,
     #[serde(skip)]
     pub progress: bool,
+    /// Write one [`BatchTrace`] line (JSON) per drawn pair that enters the loss to this file (created
+    /// anew; the steps this call runs): what training drew and fed the network, for checking the options.
+    #[serde(skip)]
+    pub trace: Option<PathBuf>,
 }
 
 impl DescriptorTrainOptions {
@@ -83,6 +87,7 @@ impl DescriptorTrainOptions {
             out,
             resume: false,
             progress: false,
+            trace: None,
         }
     }
 
@@ -149,6 +154,46 @@ fn near_mask(targets: &[Point], radius: f32) -> Tensor {
     Tensor::from_slice(&mask).view([n as i64, n as i64])
 }
 
+/// One line of the batch trace ([`DescriptorTrainOptions::trace`], `train descriptor --trace-batches`):
+/// one drawn pair of one step as the network saw it, after `drop_filled` and augmentation: the sizes of
+/// the two clouds its patches (or features) are made from, the corresponding points drawn (indices into
+/// those clouds; row i of each are partners) and their coordinates.
+#[derive(Clone, Debug, Serialize)]
+pub struct BatchTrace<'a> {
+    pub step: u64,
+    /// The draw within the step (0..pairs per step).
+    pub slot: usize,
+    /// Index of the pair in the training pairs (the order `--data` loads them).
+    pub pair: usize,
+    pub key: &'a str,
+    pub source_points: usize,
+    pub target_points: usize,
+    pub source: &'a [usize],
+    pub target: &'a [usize],
+    pub source_xyz: Vec<[f32; 3]>,
+    pub target_xyz: Vec<[f32; 3]>,
+}
+
+impl<'a> BatchTrace<'a> {
+    /// The record of `pair` (number `index` of the training pairs, as drawn: dropped and augmented) fed
+    /// with the partners `source[i]`, `target[i]`.
+    pub fn new(step: u64, slot: usize, index: usize, pair: &'a TrainPair, source: &'a [usize], target: &'a [usize]) -> Self {
+        let xyz = |cloud: &[Point], idx: &[usize]| idx.iter().map(|&i| [cloud[i].x, cloud[i].y, cloud[i].z]).collect();
+        BatchTrace {
+            step,
+            slot,
+            pair: index,
+            key: &pair.key,
+            source_points: pair.source.len(),
+            target_points: pair.target.len(),
+            source,
+            target,
+            source_xyz: xyz(&pair.source, source),
+            target_xyz: xyz(&pair.target, target),
+        }
+    }
+}
+
 /// Result of a run.
 pub struct DescriptorTrainReport {
     pub first_step: u64,
@@ -210,6 +255,10 @@ pub fn train_descriptor(pairs: &[TrainPair], opts: &DescriptorTrainOptions, mut 
     } else {
         Vec::new()
     };
+    let mut trace = match &opts.trace {
+        Some(path) => Some((path, std::io::BufWriter::new(std::fs::File::create(path).map_err(|e| Error::io(path, e))?))),
+        None => None,
+    };
     let log_path = opts.out.join(LOSS_LOG);
     let mut log = std::fs::OpenOptions::new().create(true).append(true).open(&log_path).map_err(|e| Error::io(&log_path, e))?;
     let bar = crate::runtime::progress::bar(steps, opts.progress, "step");
@@ -220,7 +269,7 @@ pub fn train_descriptor(pairs: &[TrainPair], opts: &DescriptorTrainOptions, mut 
         let mut rng = Rng::new(opts.seed).fork(step);
         let mut step_loss = 0.0;
         let mut step_hits = 0.0;
-        for _ in 0..opts.pairs_per_step {
+        for slot in 0..opts.pairs_per_step {
             let k = rng.below(pairs.len() as u64) as usize;
             let (augmented, fresh_index);
             let (pair, index) = if augmenting {
@@ -235,6 +284,10 @@ pub fn train_descriptor(pairs: &[TrainPair], opts: &DescriptorTrainOptions, mut 
                 continue;
             }
             let (si, ti): (Vec<usize>, Vec<usize>) = c.into_iter().unzip();
+            if let Some((path, w)) = &mut trace {
+                let line = serde_json::to_string(&BatchTrace::new(step, slot, k, pair, &si, &ti)).expect("json");
+                writeln!(w, "{line}").map_err(|e| Error::io(path, e))?;
+            }
             let fresh;
             let [ps, pt] = match cached.get(k) {
                 Some(both) => both,
@@ -277,6 +330,9 @@ pub fn train_descriptor(pairs: &[TrainPair], opts: &DescriptorTrainOptions, mut 
         }
     }
     bar.finish_and_clear();
+    if let Some((path, mut w)) = trace {
+        w.flush().map_err(|e| Error::io(path, e))?;
+    }
     let parameters = vars.iter().map(|(_, t)| t.numel() as i64).sum();
     Ok(DescriptorTrainReport { first_step: start + 1, steps, parameters, final_loss: last })
 }
