@@ -2,7 +2,8 @@
 //! datasets built by the binary exactly as `pointreggpt query` does: the same rows and pair keys in unit
 //! order, the points bit for bit, the transforms, overlaps, unsigned seeds and per-point provenance, the
 //! same rows for each filter as the equivalent SQL `where`, and the DataLoader + `collate` path with
-//! torch. In a folder and on a local S3 server (moto), for a version-2 dataset and a version-1 one.
+//! torch. In a folder and on a local S3 server (moto), for a version-2 dataset and a version-1 one. The
+//! streaming loader gives every pair exactly once per epoch across ranks × DataLoader workers.
 //! tests/python/check_package.py does the Python side; it fails (never skips) when the package, pyarrow
 //! or torch is missing, or when the installed package differs from python/.
 
@@ -168,6 +169,27 @@ fn the_package_reads_an_s3_dataset_as_query_does() {
     let report = check(plan, &r, dir.path(), &[]);
     assert!(report["planted"].as_str().unwrap().starts_with("trainers/prgpt/shards/"), "{report}");
     assert_eq!(report["env"], true);
+}
+
+/// The training loaders at a size where shards have several row groups: 320 units in 5 shards of 72 (row
+/// groups of 64 rows: 9 of them), streamed by 2 ranks × 3 DataLoader workers (neither the 5 shards nor
+/// the 9 row groups divide evenly), two epochs; and the map-style dataset in a random order.
+#[test]
+fn the_streaming_loader_gives_every_pair_once_per_epoch_across_ranks_and_workers() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("config.toml");
+    std::fs::write(&config, synthetic_config(1, 160, 1, 2, 160, 120, 72)).unwrap();
+    let ds = dir.path().join("ds");
+    build(&config, ds.to_str().unwrap(), &[]);
+    assert_eq!(committed_shards(&ds), 5);
+    let r = reference(ds.to_str().unwrap(), dir.path(), true, false, &[]);
+    let plan = json!({
+        "dataset": ds, "storage_options": null, "schema_version": "pairs/2", "shards": 5,
+        "any_rows_per_filter": true, "loader_workers": 0, "streaming": {"ranks": 2, "workers": 3},
+    });
+    let report = check(plan, &r, dir.path(), &[]);
+    assert_eq!(report["streaming"]["pieces"], 9, "{report}");
+    assert_eq!(report["streaming"]["pairs"], r.ok, "{report}");
 }
 
 /// A version-1 dataset made by the product's own version-1 writer: a dataset whose `dataset.toml` says

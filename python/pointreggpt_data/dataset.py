@@ -146,10 +146,12 @@ class Shard:
         self.rows = entry["rows"]
         self.schema_version = schema_version
         self._fragment = None
+        self._groups = None
 
     def __getstate__(self):
         state = dict(self.__dict__)
         state["_fragment"] = None  # re-made (and its footer re-read) in the process that unpickles it
+        state["_groups"] = None
         return state
 
     def __repr__(self):
@@ -255,6 +257,7 @@ class Dataset:
         self.filesystem = pickle.loads(pickle.dumps(self.filesystem))  # pyarrow filesystems rebuild from their options
         for s in self.shards:
             s._fragment = None
+            s._groups = None
         self._pid = os.getpid()
 
     def __setstate__(self, state):
@@ -270,6 +273,19 @@ class Dataset:
             fragment.ensure_complete_metadata()
             shard._fragment = fragment
         return shard._fragment
+
+    def row_groups(self, shard):
+        """The shard's row groups as ``pyarrow.dataset`` fragments, in file order (from its footer, read once):
+        the smallest piece of a shard that is read on its own."""
+        if shard._groups is None:
+            shard._groups = self.fragment(shard).split_by_row_group()
+        return shard._groups
+
+    def read_row_group(self, shard, group, columns, filter=None):
+        """As ``read_shard``, for row group ``group`` of the shard only."""
+        names = self.shard_schema(shard).names
+        cols = [c for c in columns if c in names]
+        return self.row_groups(shard)[group].to_table(columns=cols, filter=filter)
 
     def shard_schema(self, shard):
         """The Arrow schema of a shard's file (from its footer, read once)."""

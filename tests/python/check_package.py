@@ -19,6 +19,8 @@ plan.json:
   plant_uncommitted  copy a committed shard under another name in shards/ first (it must not be read)
   count_bytes      (folder) check that selecting rows reads only the small columns
   loader_workers   DataLoader workers for the torch check
+  streaming        {"ranks": R, "workers": W}: StreamingPairDataset over R simulated ranks x W DataLoader
+                   workers, two epochs, every ok pair exactly once per epoch; PairDataset in a random order
   any_rows_per_filter  do not require a filter that selects some rows but not all (a fixture of unknown content)
 
 Every comparison is exact: points bit for bit (float32 bits), transforms and overlaps as stored, the
@@ -26,6 +28,7 @@ seed as the unit's unsigned seed. Prints one JSON object; exits non-zero (Assert
 """
 import filecmp
 import json
+import random
 import os
 import sys
 
@@ -280,6 +283,55 @@ def check_loader(ds, kwargs, by_key, version, workers):
     return {"batches": batches, "pairs": len(seen), "workers": workers}
 
 
+def check_streaming(ds, by_key, version, plan):
+    """StreamingPairDataset across ``ranks`` simulated ranks × ``workers`` DataLoader worker processes: each
+    epoch, the pairs of all consumers together are the `ok` pairs exactly once (against the query's list),
+    each bit for bit as the reference; another epoch, another order; the row groups of a shard are read
+    each on its own (a shard of several row groups is split between consumers). And the map-style
+    PairDataset, read in a random order, gives every pair as the reference."""
+    import torch
+
+    ranks, workers = plan["ranks"], plan["workers"]
+    ok_keys = sorted(k for k, r in by_key.items() if r["status"] == "ok")
+    pieces = prd.StreamingPairDataset(ds, seed=5).pieces
+    assert len(pieces) > len(ds.shards), f"some shard has several row groups: {len(pieces)} row groups in {len(ds.shards)} shards"
+    assert len(ds.shards) % workers and len(pieces) % (ranks * workers), "shards and row groups that do not divide evenly"
+    orders = []
+    for epoch in range(2):
+        seen, per_consumer = [], []
+        for rank in range(ranks):
+            stream = prd.StreamingPairDataset(ds, tensors=True, seed=5, buffer_size=8, rank=rank, world_size=ranks)
+            assert isinstance(stream, torch.utils.data.IterableDataset)
+            stream.set_epoch(epoch)
+            loader = torch.utils.data.DataLoader(stream, batch_size=3, collate_fn=prd.collate, num_workers=workers)
+            keys = []
+            for b in loader:
+                src = torch.split(b["source_points"], b["source_lengths"].tolist())
+                tgt = torch.split(b["target_points"], b["target_lengths"].tolist())
+                for j, key in enumerate(b["pair_key"]):
+                    r = by_key[key]
+                    assert same_bits(src[j].numpy(), r["source_points"]) and same_bits(tgt[j].numpy(), r["target_points"]), f"stream {key}: points"
+                    assert same_bits(b["T_target_from_source"][j].numpy(), r["T"]), f"stream {key}: transform"
+                keys += b["pair_key"]
+            per_consumer.append(len(keys))
+            seen += keys
+        assert len(seen) == len(set(seen)), f"epoch {epoch}: {len(seen) - len(set(seen))} pairs seen twice"
+        assert sorted(seen) == ok_keys, f"epoch {epoch}: {len(seen)} pairs streamed, {len(ok_keys)} ok pairs committed"
+        orders.append(seen)
+    assert orders[0] != orders[1], "another epoch, another order"
+    # Unshuffled, one consumer: every pair in unit order within each row group, row groups in file order.
+    plain = prd.StreamingPairDataset(ds, shuffle=False)
+    assert sorted(p["pair_key"] for p in plain) == ok_keys
+    # Map-style random access, one row group read per item.
+    mapped = prd.PairDataset(ds)
+    order = list(range(len(mapped)))
+    random.Random(7).shuffle(order)
+    for i in order:
+        p = mapped[i]
+        check_pair(p, by_key[p["pair_key"]], version, f"PairDataset[{i}]")
+    return {"pieces": len(pieces), "shards": len(ds.shards), "epochs": len(orders), "pairs": len(orders[0])}
+
+
 def check_store_parsing():
     """URL forms and option spellings, without a server (constructing a client connects nowhere)."""
     key = "a2V5"
@@ -376,6 +428,8 @@ def main():
     report["ok"] = sum(1 for r in ref if r["status"] == "ok")
     assert report["loader"]["pairs"] == report["ok"]
 
+    if plan.get("streaming"):
+        report["streaming"] = check_streaming(ds, by_key, version, plan["streaming"])
     if plan.get("count_bytes"):
         report["bytes"] = check_bytes_read(plan["dataset"])
     if plan.get("env"):
