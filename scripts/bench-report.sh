@@ -35,6 +35,14 @@ TMP="$(mktemp)"
     echo "(benchmark fill failed)"
   fi
   echo '```'
+  echo
+  echo "## scale (\`benchmarks/scale.sh\`, SIZE=${SCALE_SIZE:-20000})"
+  echo
+  echo '```'
+  if ! SIZE="${SCALE_SIZE:-20000}" ./benchmarks/scale.sh 2>&1; then
+    echo "(benchmark scale failed)"
+  fi
+  echo '```'
 } > "$TMP"
 mv "$TMP" "$OUT"
 echo "wrote $OUT"
