@@ -336,6 +336,10 @@ fn the_frame_cache_decodes_each_frame_once_and_changes_no_pair() {
     let dir = tempfile::tempdir().unwrap();
     let data = dir.path().join("seq");
     folder_with_bad_frames(&data);
+    // Frame 7 decodes but holds no valid depth: an input error that still names its file and content.
+    let png = data.join("frame-000007.depth.png");
+    let raw = pointreggpt::sources::depth_png::read_depth_png(&png).unwrap();
+    pointreggpt::sources::depth_png::write_depth_png(&png, raw.width, raw.height, &vec![0; raw.data.len()]).unwrap();
     let config = dir.path().join("c.toml");
     std::fs::write(&config, format!("shard_size = 5\nsamples_per_frame = 3\n[source]\nkind = \"directory\"\npath = \"{}\"\n", data.display())).unwrap();
     let run = |name: &str, extra: &[&str]| {
@@ -350,9 +354,17 @@ fn the_frame_cache_decodes_each_frame_once_and_changes_no_pair() {
     assert_eq!(cached, fresh, "the same pairs, content hash for content hash");
     // The pose file is read at ingest too: frame 5's bad pose fails for each of its units either way.
     assert_eq!(decoded_fresh, 24);
-    assert_eq!(decoded, 6 + 2 * 3, "good frames once; a failing frame is tried by each of its units, so each gets its error");
+    assert_eq!(decoded, 5 + 3 * 3, "good frames once; a failing frame is tried by each of its units, so each gets its error");
     let rows = Dataset::open(dir.path().join("cached")).unwrap().read_pairs().unwrap();
-    assert_eq!(rows.iter().filter(|r| r.status == Status::InputError).count(), 6, "2 bad frames x 3 samples");
+    assert_eq!(rows.iter().filter(|r| r.status == Status::InputError).count(), 9, "3 bad frames x 3 samples");
+    let empty: Vec<_> = rows.iter().filter(|r| r.frame_key.ends_with("frame-000007")).collect();
+    assert_eq!(empty.len(), 3);
+    let hash = blake3::hash(&std::fs::read(&png).unwrap()).to_hex().to_string();
+    for r in empty {
+        assert_eq!(r.status, Status::InputError, "{}", r.message);
+        assert_eq!(r.source_path, png.display().to_string());
+        assert_eq!(r.source_hash, hash, "the file's blake3");
+    }
 }
 
 #[test]

@@ -112,7 +112,18 @@ impl Ingest {
     }
 
     fn prepare(&self, unit: &mut PairUnit) -> Result<()> {
-        let f = self.frames.get(unit.frame_index, || self.prepare_frame(unit.frame_index))?;
+        let f = match self.frames.get(unit.frame_index, || self.prepare_frame(unit.frame_index)) {
+            Ok(f) => f,
+            Err(e) => {
+                // A frame that decodes but makes no pair (e.g. no valid depth) still names its file and
+                // content in the input_error row (failures are not cached: read again, rare).
+                if let Ok(frame) = self.catalog.load(unit.frame_index) {
+                    unit.source_path = frame.depth_path.display().to_string();
+                    unit.source_hash = frame.content_hash;
+                }
+                return Err(e);
+            }
+        };
         unit.source_path = f.source_path.clone();
         unit.source_hash = f.source_hash.clone();
         unit.k = Some(f.k);
