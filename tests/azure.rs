@@ -365,7 +365,7 @@ fn large_shards_go_up_in_blocks_and_read_back_whole() {
     (draft.file, draft.bytes, draft.blake3, draft.config_hash) = (String::new(), 0, String::new(), "h1".into());
     // Parts of 1 MiB (Azure blocks have no minimum size): Put Block per part, then Put Block List.
     let store = ObjectDatasetStore::open(url, &url::Url::parse(url).unwrap()).unwrap();
-    let entry = store.commit_object_with(draft, &batch, 1 << 20).unwrap();
+    let entry = store.commit_object_with(draft, &batch, 1 << 20, pointreggpt::shards::ROW_GROUP_ROWS).unwrap();
     assert!(entry.bytes > 3 << 20, "{} bytes", entry.bytes);
     let blocks: u64 = peer(&ep, &["blocks", &ep, "big", &format!("ds/shards/{}", entry.file)]).parse().unwrap();
     assert_eq!(blocks, entry.bytes.div_ceil(1 << 20), "{} bytes", entry.bytes);

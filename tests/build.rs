@@ -44,6 +44,37 @@ fn same_pairs_whatever_the_thread_count_and_shard_size() {
     assert!(rows.iter().filter(|r| r.status == Status::Ok).count() >= 15, "most synthetic pairs are valid");
 }
 
+/// Rows per row group of every shard file of a folder dataset, by file name.
+fn row_groups(dataset: &Path) -> BTreeMap<String, Vec<i64>> {
+    use parquet::file::reader::{FileReader, SerializedFileReader};
+    let mut out = BTreeMap::new();
+    for entry in std::fs::read_dir(dataset.join("shards")).unwrap() {
+        let path = entry.unwrap().path();
+        let reader = SerializedFileReader::new(std::fs::File::open(&path).unwrap()).unwrap();
+        let sizes = reader.metadata().row_groups().iter().map(|g| g.num_rows()).collect();
+        out.insert(path.file_name().unwrap().to_string_lossy().into_owned(), sizes);
+    }
+    out
+}
+
+#[test]
+fn row_group_rows_changes_the_file_layout_and_nothing_else() {
+    let dir = tempfile::tempdir().unwrap();
+    let base = synthetic_config(2, 20, 4, 2, 320, 240, 7);
+    let a = build_in_process(&base, &dir.path().join("a"), 2);
+    let small = format!("{base}[output]\nrow_group_rows = 3\n");
+    let b = build_in_process(&small, &dir.path().join("b"), 2);
+    assert_eq!(a, b, "the same rows whatever the row-group size");
+    // 20 units in shards of 7: 7, 7, 6 rows; one group each by default, groups of 3 with the key.
+    let layout = |groups: [&[i64]; 3]| (0..3).map(|k| (format!("pairs-00000{k}.parquet"), groups[k].to_vec())).collect::<BTreeMap<_, _>>();
+    assert_eq!(row_groups(&dir.path().join("a")), layout([&[7], &[7], &[6]]));
+    assert_eq!(row_groups(&dir.path().join("b")), layout([&[3, 3, 1], &[3, 3, 1], &[3, 3]]));
+    // Not part of the dataset's identity: resuming with the default size is the same dataset, nothing to do.
+    let again = run_build(&BuildConfig::from_toml(&base, "test").unwrap(), &BuildOptions::into_folder(dir.path().join("b")), &CancelToken::new()).unwrap();
+    assert_eq!((again.already_committed, again.committed_now.len()), (3, 0));
+    assert!(BuildConfig::from_toml(&format!("{base}[output]\nrow_group_rows = 0\n"), "test").unwrap().validate().is_err());
+}
+
 /// A point of a cloud is "on" the true surface within 2 cm: a 2.5 cm voxel's centroid lies on a plane
 /// through its points and, at edges and corners, within about half a voxel of them; the sensor's axial
 /// noise (σ = 1.2 mm + 1.9 mm/m²·(z − 0.4 m)², 2–9 mm at 1–2.5 m) is further averaged over the readings

@@ -172,13 +172,13 @@ fn the_package_reads_an_s3_dataset_as_query_does() {
 }
 
 /// The training loaders at a size where shards have several row groups: 320 units in 5 shards of 72 (row
-/// groups of 64 rows: 9 of them), streamed by 2 ranks × 3 DataLoader workers (neither the 5 shards nor
+/// groups of at most 64 rows, `output.row_group_rows`: 9 of them), streamed by 2 ranks × 3 DataLoader workers (neither the 5 shards nor
 /// the 9 row groups divide evenly), two epochs; and the map-style dataset in a random order.
 #[test]
 fn the_streaming_loader_gives_every_pair_once_per_epoch_across_ranks_and_workers() {
     let dir = tempfile::tempdir().unwrap();
     let config = dir.path().join("config.toml");
-    std::fs::write(&config, synthetic_config(1, 160, 1, 2, 160, 120, 72)).unwrap();
+    std::fs::write(&config, synthetic_config(1, 160, 1, 2, 160, 120, 72) + "[output]\nrow_group_rows = 64\n").unwrap();
     let ds = dir.path().join("ds");
     build(&config, ds.to_str().unwrap(), &[]);
     assert_eq!(committed_shards(&ds), 5);

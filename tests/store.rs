@@ -564,7 +564,7 @@ fn large_shards_go_up_in_parts_and_abandoned_uploads_are_aborted_by_repair() {
         created: "2025-01-01T00:00:00Z".into(),
     };
     let store = ObjectDatasetStore::open(url, &url::Url::parse(url).unwrap()).unwrap();
-    let entry = store.commit_object_with(draft, &batch, 5 << 20).unwrap();
+    let entry = store.commit_object_with(draft, &batch, 5 << 20, pointreggpt::shards::ROW_GROUP_ROWS).unwrap();
     let listed = objects(&moto.endpoint(), "big", "ds");
     let (size, etag) = &listed[&format!("shards/{}", entry.file)];
     assert_eq!(*size, entry.bytes);

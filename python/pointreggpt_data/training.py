@@ -38,8 +38,8 @@ class PairDataset(_Base):
     ``(low, high)``), ``where`` (a ``pyarrow.compute`` expression over ``INDEX_COLUMNS``). ``tensors=True``
     returns torch tensors instead of numpy arrays. ``columns``: more columns to return, as Python values
     (e.g. ``["source_intrinsics"]``). ``cache_shards``: decoded row groups kept per process (1 by
-    default: iterate in order or with ``ShardShuffleSampler``; a fully random order reads a row group, at
-    most 64 pairs, per item). For training, ``StreamingPairDataset`` is faster.
+    default: iterate in order or with ``ShardShuffleSampler``; a fully random order reads a row group per
+    item: at most the build's ``output.row_group_rows`` pairs, 16 by default). For training, ``StreamingPairDataset`` is faster.
 
     Building the index reads only the unit indices (and the filter's columns) of each row group; an item
     reads the pair columns of its row group once (then served from the cache).
@@ -125,7 +125,7 @@ class StreamingPairDataset(_IterBase):
     shuffles its pairs through a buffer of ``buffer_size`` pairs (memory: about ``buffer_size`` × 0.2 MB).
     ``rank`` / ``world_size`` default to ``torch.distributed``'s when it is initialized, else 0 / 1; the
     worker comes from ``torch.utils.data.get_worker_info()``. Consumers get whole row groups, so their pair
-    counts differ by up to a row group's (64 pairs): with DistributedDataParallel, end the epoch on the
+    counts differ by up to a row group's (``output.row_group_rows``, 16 by default): with DistributedDataParallel, end the epoch on the
     shortest rank (e.g. ``torch.distributed.algorithms.join.Join``) or drop the remainder.
 
     Call ``set_epoch(e)`` before each epoch's iteration (with ``persistent_workers=False``, the default,

@@ -78,7 +78,8 @@ pub fn run_build(config: &BuildConfig, opts: &BuildOptions, cancel: &CancelToken
     let total_shards = shard_count(config.shard_size, total_units);
     let identity = config.identity()?;
     let dataset = Dataset::create_or_open(&opts.out, &identity.toml, &identity.dataset_hash)?
-        .with_worker(format!("{}-of-{}", opts.worker, opts.workers));
+        .with_worker(format!("{}-of-{}", opts.worker, opts.workers))
+        .with_row_group_rows(config.output.row_group_rows);
     dataset.clean_stale_temps()?;
     let committed = dataset.resumable("pairs")?;
     let (owned, todo, todo_units) = plan_shards(total_units, config.shard_size, opts.worker, opts.workers, &committed);

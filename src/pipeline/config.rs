@@ -127,10 +127,13 @@ impl BuildConfig {
     /// The config's identity ([`crate::config_paths::identity_toml`]: paths as the config file wrote
     /// them, checkpoints by content): the text the dataset records, its hash (a resume must match it) and
     /// the hash of everything that determines a row's content (without `shard_size`, which changes which
-    /// file a row lands in, not the row). Reads the checkpoints.
+    /// file a row lands in, not the row). `output.row_group_rows` is in neither: it changes only how a file
+    /// is laid out. Reads the checkpoints.
     pub fn identity(&self) -> Result<ConfigIdentity> {
-        let content = BuildConfig { shard_size: 0, ..self.clone() };
-        Ok(ConfigIdentity::new(identity_toml(self)?, &identity_toml(&content)?))
+        let output = OutputConfig { row_group_rows: crate::shards::ROW_GROUP_ROWS, ..self.output.clone() };
+        let dataset = BuildConfig { output, ..self.clone() };
+        let content = BuildConfig { shard_size: 0, ..dataset.clone() };
+        Ok(ConfigIdentity::new(identity_toml(&dataset)?, &identity_toml(&content)?))
     }
 
     /// Checks every range before any work starts (and that model checkpoints load); the error names the key.
@@ -148,6 +151,7 @@ impl BuildConfig {
         self.correct.validate()?;
         self.inpaint.validate("inpaint")?;
         self.successive.validate()?;
+        self.output.validate()?;
         self.voxelize.validate()?;
         self.validate.validate()
     }

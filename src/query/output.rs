@@ -45,7 +45,7 @@ pub fn write_batches(batches: &[RecordBatch], format: OutputFormat, out: &mut dy
     match format {
         OutputFormat::Parquet => {
             let Some(first) = batches.first() else { return Ok(()) };
-            let bytes = crate::shards::write_parquet_bytes(&first.schema(), batches)?;
+            let bytes = crate::shards::write_parquet_bytes(&first.schema(), batches, crate::shards::ROW_GROUP_ROWS)?;
             out.write_all(&bytes).map_err(|e| Error::io("<output>", e))
         }
         OutputFormat::Table => write_table(batches, out),

@@ -56,7 +56,7 @@ impl Dataset {
             worker: self.worker.clone(),
             created: utc_now(),
         };
-        self.store.commit(draft, batch)
+        self.store.commit(draft, batch, self.row_group_rows)
     }
 
     /// Commits `rows` as shard `shard` of the `pairs` table (see [`Dataset::commit_shard`]), in the

@@ -8,6 +8,7 @@ use super::config_diff::config_differences;
 use super::manifest::{shard_stem, utc_now};
 use super::schema::{pairs_schema_of, SCHEMA_VERSION};
 use super::CODE_VERSION;
+use super::parquet_io::ROW_GROUP_ROWS;
 pub use super::store::{DATASET_FILE, MANIFEST_DIR, SHARDS_DIR, TMP_DIR};
 use super::store::{open_store, DatasetStore};
 use crate::atomic::{hostname, Published};
@@ -37,6 +38,8 @@ pub struct Dataset {
     pub(super) header: DatasetHeader,
     /// Worker id recorded in manifest entries.
     pub(super) worker: String,
+    /// Most rows in one row group of the shard files this handle commits.
+    pub(super) row_group_rows: usize,
 }
 
 impl Dataset {
@@ -90,12 +93,19 @@ impl Dataset {
     }
 
     fn with_header(store: Arc<dyn DatasetStore>, header: DatasetHeader) -> Dataset {
-        Dataset { store, header, worker: format!("{}:{}", hostname(), std::process::id()) }
+        Dataset { store, header, worker: format!("{}:{}", hostname(), std::process::id()), row_group_rows: ROW_GROUP_ROWS }
     }
 
     /// Sets the worker id recorded in manifest entries (default `<host>:<pid>`).
     pub fn with_worker(mut self, worker: impl Into<String>) -> Dataset {
         self.worker = worker.into();
+        self
+    }
+
+    /// Sets the most rows in one row group of the shard files committed through this handle (default
+    /// [`ROW_GROUP_ROWS`]). It changes how files are laid out, not what they hold.
+    pub fn with_row_group_rows(mut self, rows: usize) -> Dataset {
+        self.row_group_rows = rows.max(1);
         self
     }
 

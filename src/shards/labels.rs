@@ -247,7 +247,7 @@ mod tests {
     fn round_trip_through_parquet_is_exact() {
         let rows: Vec<LabelRow> = (0..5).map(row).collect();
         let batch = labels_to_batch(&rows).unwrap();
-        let bytes = super::super::write_parquet_bytes(&labels_schema(), &[batch]).unwrap();
+        let bytes = super::super::write_parquet_bytes(&labels_schema(), &[batch], crate::shards::ROW_GROUP_ROWS).unwrap();
         let dir = tempfile::tempdir().unwrap();
         let p = dir.path().join("l.parquet");
         std::fs::write(&p, bytes).unwrap();

@@ -62,7 +62,7 @@ pub use dataset::{Dataset, DatasetHeader, PAIRS_TABLE};
 pub use labels::{batch_to_labels, labels_schema, labels_to_batch, LabelRow, LABELS_TABLE};
 pub use manifest::ManifestEntry;
 pub use pairs::{batch_to_pairs, pairs_to_batch};
-pub use parquet_io::{read_parquet_bytes, read_parquet_file, write_parquet_bytes};
+pub use parquet_io::{read_parquet_bytes, read_parquet_file, write_parquet_bytes, ROW_GROUP_ROWS};
 pub use row::{PairRow, StageTiming, Status};
 pub use schema::{pairs_schema, pairs_schema_of, SCHEMA_VERSION, SCHEMA_VERSION_1, SCHEMA_VERSION_KEY};
 pub use verify::{Problem, RepairReport, VerifyReport};

@@ -1,8 +1,9 @@
 //! Record batches → zstd-compressed Parquet bytes, and Parquet files → record batches.
 //!
 //! Rows of the shard tables are big (two clouds of ~20k points and up to four PNGs: 0.5–2 MB each), so a row
-//! group holds at most [`ROW_GROUP_ROWS`] rows or about [`ROW_GROUP_BYTES`]: a shard of a few hundred rows
-//! gives a few row groups that readers (DuckDB, pyarrow) can decode in parallel. Dictionary encoding is
+//! group holds at most `row_group_rows` rows (the `output.row_group_rows` key of a build, default
+//! [`ROW_GROUP_ROWS`]) or about [`ROW_GROUP_BYTES`]: a shard of a few hundred rows gives several row groups
+//! that readers (DuckDB, pyarrow) decode in parallel, and a reader wanting one pair decodes one group. Dictionary encoding is
 //! kept for the repetitive text columns and turned off for the bulky float and binary columns, where it
 //! only costs time.
 
@@ -19,8 +20,9 @@ use std::path::Path;
 /// zstd level of every column.
 pub const ZSTD_LEVEL: i32 = 3;
 
-/// Most rows in one row group.
-pub const ROW_GROUP_ROWS: usize = 64;
+/// Most rows in one row group unless a build's `output.row_group_rows` says otherwise (chosen by
+/// measurement: benchmarks/README.md, "Row-group size").
+pub const ROW_GROUP_ROWS: usize = 16;
 
 /// Row groups are closed once their encoded size passes this (bytes).
 pub const ROW_GROUP_BYTES: usize = 128 << 20;
@@ -28,13 +30,13 @@ pub const ROW_GROUP_BYTES: usize = 128 << 20;
 /// Rows read per batch.
 const READ_BATCH_ROWS: usize = 64;
 
-/// The writer settings for a table of `schema`: zstd, bounded row groups, no dictionary or statistics on
-/// float lists and binary columns.
-pub fn writer_properties(schema: &SchemaRef) -> WriterProperties {
+/// The writer settings for a table of `schema`: zstd, row groups of at most `row_group_rows` rows, no
+/// dictionary or statistics on float lists and binary columns.
+pub fn writer_properties(schema: &SchemaRef, row_group_rows: usize) -> WriterProperties {
     let level = ZstdLevel::try_new(ZSTD_LEVEL).expect("valid zstd level");
     let mut props = WriterProperties::builder()
         .set_compression(Compression::ZSTD(level))
-        .set_max_row_group_row_count(Some(ROW_GROUP_ROWS))
+        .set_max_row_group_row_count(Some(row_group_rows.max(1)))
         .set_max_row_group_bytes(Some(ROW_GROUP_BYTES))
         .set_created_by(format!("{} (parquet-rs)", super::CODE_VERSION));
     for field in schema.fields() {
@@ -49,11 +51,12 @@ pub fn writer_properties(schema: &SchemaRef) -> WriterProperties {
     props.build()
 }
 
-/// Encodes `batches` (all of the same schema) as one Parquet file in memory.
-pub fn write_parquet_bytes(schema: &SchemaRef, batches: &[RecordBatch]) -> Result<Vec<u8>> {
+/// Encodes `batches` (all of the same schema) as one Parquet file in memory, in row groups of at most
+/// `row_group_rows` rows.
+pub fn write_parquet_bytes(schema: &SchemaRef, batches: &[RecordBatch], row_group_rows: usize) -> Result<Vec<u8>> {
     let mut out = Vec::new();
     let err = |e: parquet::errors::ParquetError| Error::Parquet(format!("writing Parquet: {e}"));
-    let mut writer = ArrowWriter::try_new(&mut out, schema.clone(), Some(writer_properties(schema))).map_err(err)?;
+    let mut writer = ArrowWriter::try_new(&mut out, schema.clone(), Some(writer_properties(schema, row_group_rows))).map_err(err)?;
     for batch in batches {
         if batch.schema().fields() != schema.fields() {
             return Err(Error::Parquet("writing Parquet: a batch does not have the file's schema".into()));
@@ -129,7 +132,7 @@ mod tests {
 
     fn write_sample(dir: &Path, n: u64) -> (std::path::PathBuf, Vec<crate::shards::PairRow>) {
         let rows: Vec<_> = (0..n).map(sample_row).collect();
-        let bytes = write_parquet_bytes(&pairs_schema(), &[pairs_to_batch(&rows).unwrap()]).unwrap();
+        let bytes = write_parquet_bytes(&pairs_schema(), &[pairs_to_batch(&rows).unwrap()], ROW_GROUP_ROWS).unwrap();
         let path = dir.join("s.parquet");
         std::fs::write(&path, bytes).unwrap();
         (path, rows)
@@ -155,7 +158,7 @@ mod tests {
         let reader = SerializedFileReader::new(std::fs::File::open(&path).unwrap()).unwrap();
         let meta = reader.metadata();
         assert_eq!(meta.file_metadata().num_rows(), 150);
-        assert_eq!(meta.num_row_groups(), 3, "150 rows in groups of at most {ROW_GROUP_ROWS}");
+        assert_eq!(meta.num_row_groups(), 150usize.div_ceil(ROW_GROUP_ROWS), "150 rows in groups of at most {ROW_GROUP_ROWS}");
         for rg in meta.row_groups() {
             assert!(rg.num_rows() as usize <= ROW_GROUP_ROWS);
             // 30 columns, clouds and provenance lists give one leaf each, timings two.
@@ -211,6 +214,6 @@ mod tests {
     fn writing_a_batch_of_another_schema_fails() {
         let batch = pairs_to_batch(&[sample_row(0)]).unwrap();
         let other = batch.project(&[0, 1]).unwrap();
-        assert!(write_parquet_bytes(&pairs_schema(), &[other]).is_err());
+        assert!(write_parquet_bytes(&pairs_schema(), &[other], ROW_GROUP_ROWS).is_err());
     }
 }

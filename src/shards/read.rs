@@ -149,7 +149,7 @@ mod tests {
         ds.commit_pairs(0, 0, 4, &rows(0..4)).unwrap();
         // A complete shard file without manifest entry (a crash between the two renames).
         let bytes =
-            write_parquet_bytes(&crate::shards::pairs_schema(), &[pairs_to_batch(&rows(4..8)).unwrap()]).unwrap();
+            write_parquet_bytes(&crate::shards::pairs_schema(), &[pairs_to_batch(&rows(4..8)).unwrap()], 64).unwrap();
         fs::write(ds.shard_path(PAIRS_TABLE, 1), &bytes).unwrap();
         // A temp file of a shard being written.
         let tmp = ds.tmp_dir().join(TempName::new("pairs-000002.parquet").file_name());

@@ -2,24 +2,44 @@
 //! `[output]` config section.
 
 use super::PairUnit;
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::geometry::{pose_to_rows, DepthMap};
 use crate::runtime::Stage;
 use crate::shards::row::PairRow;
+use crate::shards::ROW_GROUP_ROWS;
 use crate::sources::depth_png::encode_depth_png;
 use serde::{Deserialize, Serialize};
 
-/// What each row stores besides the clouds.
+/// What each row stores besides the clouds, and how the shard files are laid out.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct OutputConfig {
     /// Store the source, condition and target depth maps and the known mask as PNG bytes.
     pub depth_maps: bool,
+    /// Most rows in one Parquet row group: a reader wanting one pair decodes its whole group, a reader
+    /// streaming pays a little per group. Only the file layout depends on it, not the rows, so it is not part
+    /// of the dataset's identity (a resume may change it) and is written out only when not the default.
+    #[serde(skip_serializing_if = "is_default_row_group_rows")]
+    pub row_group_rows: usize,
+}
+
+fn is_default_row_group_rows(rows: &usize) -> bool {
+    *rows == ROW_GROUP_ROWS
 }
 
 impl Default for OutputConfig {
     fn default() -> Self {
-        OutputConfig { depth_maps: true }
+        OutputConfig { depth_maps: true, row_group_rows: ROW_GROUP_ROWS }
+    }
+}
+
+impl OutputConfig {
+    /// Checks the ranges; the error names the key.
+    pub fn validate(&self) -> Result<()> {
+        if self.row_group_rows == 0 || self.row_group_rows > 100_000 {
+            return Err(Error::config("output.row_group_rows", "must be 1..=100000 rows"));
+        }
+        Ok(())
     }
 }
 

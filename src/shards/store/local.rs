@@ -102,11 +102,11 @@ impl DatasetStore for LocalStore {
         fs::read(&path).map(Bytes::from).map_err(|e| Error::io(&path, e))
     }
 
-    fn commit(&self, mut entry: ManifestEntry, batch: &RecordBatch) -> Result<ManifestEntry> {
+    fn commit(&self, mut entry: ManifestEntry, batch: &RecordBatch, row_group_rows: usize) -> Result<ManifestEntry> {
         // The folders may be missing in a copied dataset (`.tmp/` especially).
         self.prepare()?;
         let stem = shard_stem(&entry.table, entry.shard);
-        let bytes = write_parquet_bytes(&batch.schema(), std::slice::from_ref(batch))?;
+        let bytes = write_parquet_bytes(&batch.schema(), std::slice::from_ref(batch), row_group_rows)?;
         let path = self.root.join(SHARDS_DIR).join(format!("{stem}.parquet"));
         let (size, hash) = match write_atomic(&self.tmp_dir(), &path, &bytes, Publish::KeepExisting)? {
             Published::Written => (bytes.len() as u64, blake3::hash(&bytes)),

@@ -90,8 +90,9 @@ pub trait DatasetStore: fmt::Debug + Send + Sync {
     /// Commits `batch` as the shard `draft` describes: writes the shard file and then its manifest
     /// entry so that readers see all of it or nothing, whatever other writers of the same shard do.
     /// `draft` has every field but `file`, `bytes` and `blake3`; returns the entry now committed
-    /// (another writer's, when it committed the shard first).
-    fn commit(&self, draft: ManifestEntry, batch: &RecordBatch) -> Result<ManifestEntry>;
+    /// (another writer's, when it committed the shard first). The file has row groups of at most
+    /// `row_group_rows` rows.
+    fn commit(&self, draft: ManifestEntry, batch: &RecordBatch, row_group_rows: usize) -> Result<ManifestEntry>;
 
     /// Removes the manifest entry `rel` (nothing if it does not exist), so the shard no longer exists
     /// for readers and a resume redoes it; `file` is the shard file the entry named, which an object

@@ -301,8 +301,8 @@ impl DatasetStore for ObjectDatasetStore {
         self.run(async { self.store.get(&key).await?.bytes().await })?.map_err(|e| self.err(rel, e))
     }
 
-    fn commit(&self, draft: ManifestEntry, batch: &RecordBatch) -> Result<ManifestEntry> {
-        self.commit_object(draft, batch)
+    fn commit(&self, draft: ManifestEntry, batch: &RecordBatch, row_group_rows: usize) -> Result<ManifestEntry> {
+        self.commit_object(draft, batch, row_group_rows)
     }
 
     fn retract(&self, rel: &str, file: &str) -> Result<()> {

@@ -38,13 +38,20 @@ pub fn object_id() -> String {
 }
 
 impl ObjectDatasetStore {
-    /// Commits `batch` as described in the module docs, in parts of [`PART_SIZE`] above that size.
-    pub(super) fn commit_object(&self, entry: ManifestEntry, batch: &RecordBatch) -> Result<ManifestEntry> {
-        self.commit_object_with(entry, batch, PART_SIZE)
+    /// Commits `batch` as described in the module docs (row groups of at most `row_group_rows` rows), in
+    /// parts of [`PART_SIZE`] above that size.
+    pub(super) fn commit_object(&self, entry: ManifestEntry, batch: &RecordBatch, row_group_rows: usize) -> Result<ManifestEntry> {
+        self.commit_object_with(entry, batch, PART_SIZE, row_group_rows)
     }
 
     /// [`Self::commit_object`] with parts of `part_size` bytes (tests exercise multipart uploads with it).
-    pub fn commit_object_with(&self, mut entry: ManifestEntry, batch: &RecordBatch, part_size: usize) -> Result<ManifestEntry> {
+    pub fn commit_object_with(
+        &self,
+        mut entry: ManifestEntry,
+        batch: &RecordBatch,
+        part_size: usize,
+        row_group_rows: usize,
+    ) -> Result<ManifestEntry> {
         let stem = shard_stem(&entry.table, entry.shard);
         let file = format!("{stem}-{}.parquet", object_id());
         let object_rel = format!("{SHARDS_DIR}/{file}");
@@ -56,7 +63,7 @@ impl ObjectDatasetStore {
 
         let upload = ShardUpload::new(self.store.clone(), self.multipart.clone(), self.key(&object_rel), record_key, record, part_size);
         let url = self.locate(&object_rel).display().to_string();
-        let uploaded = self.run(write_batch(upload, batch, &url))??;
+        let uploaded = self.run(write_batch(upload, batch, &url, row_group_rows))??;
         (entry.file, entry.bytes, entry.blake3) = (file.clone(), uploaded.bytes, uploaded.blake3.to_hex().to_string());
 
         let committed = self.publish_entry(&format!("{MANIFEST_DIR}/{stem}.json"), entry)?;

@@ -150,9 +150,9 @@ impl AsyncFileWriter for ShardUpload {
 
 /// Encodes `batch` as a zstd Parquet file (the same writer settings as a local shard) into `upload`;
 /// on failure aborts the multipart upload. Errors name `url`. Returns what was written.
-pub async fn write_batch(upload: ShardUpload, batch: &RecordBatch, url: &str) -> Result<Uploaded> {
+pub async fn write_batch(upload: ShardUpload, batch: &RecordBatch, url: &str, row_group_rows: usize) -> Result<Uploaded> {
     let schema = batch.schema();
-    let mut writer = AsyncArrowWriter::try_new(upload, schema.clone(), Some(writer_properties(&schema)))
+    let mut writer = AsyncArrowWriter::try_new(upload, schema.clone(), Some(writer_properties(&schema, row_group_rows)))
         .map_err(|e| Error::Parquet(format!("writing Parquet: {e}")))?;
     let written = match writer.write(batch).await {
         Ok(()) => writer.finish().await.map(|_| ()),
