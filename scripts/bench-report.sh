@@ -36,6 +36,14 @@ TMP="$(mktemp)"
   fi
   echo '```'
   echo
+  echo "## row groups (\`benchmarks/row_groups.sh\`)"
+  echo
+  echo '```'
+  if ! ./benchmarks/row_groups.sh 2>&1; then
+    echo "(benchmark row_groups failed)"
+  fi
+  echo '```'
+  echo
   echo "## scale (\`benchmarks/scale.sh\`, SIZE=${SCALE_SIZE:-20000})"
   echo
   echo '```'
