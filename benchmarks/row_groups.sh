@@ -7,19 +7,11 @@
 # Needs a release build, the test peers (duckdb, deltalake, torch, pointreggpt_data) and the real data
 # (POINTREGGPT_REAL_DATA). Work folder: ROW_GROUPS_BENCH_DIR (default: a temporary folder, removed).
 set -euo pipefail
-cd "$(dirname "$0")/.."
-ROOT="$(pwd)"
-BIN="${POINTREGGPT_BIN:-$ROOT/target/release/pointreggpt}"
-PYTHON="${PYTHON:-python3}"
-REAL="${POINTREGGPT_REAL_DATA:-../shared/realdata}/7scenes-redkitchen"
+NAME="row-group bench" KEEP=ROW_GROUPS_BENCH_DIR
+source "$(dirname "$0")/lib.sh"
 SIZE="${SIZE:-4000}"
 ROWS="${ROWS:-8 16 32 64 128}"  # not GROUPS: bash keeps the group ids there
-[ -d "$REAL" ] || { echo "row-group bench: no real data at $REAL (set POINTREGGPT_REAL_DATA)" >&2; exit 1; }
 (( SIZE % 400 == 0 )) || { echo "row-group bench: SIZE must be a multiple of 400" >&2; exit 1; }
-if [[ -n "${ROW_GROUPS_BENCH_DIR:-}" ]]; then W="$ROW_GROUPS_BENCH_DIR"; else W="$(mktemp -d)"; trap 'rm -rf "$W"' EXIT; fi
-mkdir -p "$W"
-now() { date +%s.%N; }
-since() { awk -v a="$(now)" -v b="$1" 'BEGIN { printf "%.2f", a - b }'; }
 Q="select avg(array_length(target_points)) m from pairs"
 
 echo "row-group sizes: $SIZE pairs per build, $(nproc) cores; rates in pairs/s"

@@ -15,20 +15,22 @@ const MIN_POINTS_PER_PART: usize = 32_768;
 /// is sorted by voxel index `(ix, iy, iz)` lexicographically, and each centroid sums its points in input
 /// order, so the result is bit-identical whatever the thread count.
 pub fn voxel_downsample(points: &[Point], voxel: f32) -> Vec<Point> {
+    downsample(points, None, voxel).0
+}
+
+/// [`voxel_downsample`] with, when `tags` is given, each voxel's [`PointTag`] summary.
+fn downsample(points: &[Point], tags: Option<&[PointTag]>, voxel: f32) -> (Vec<Point>, Vec<PointTag>) {
     assert!(voxel.is_finite() && voxel > 0.0, "voxel size must be positive, got {voxel}");
     if points.is_empty() {
-        return Vec::new();
+        return (Vec::new(), Vec::new());
     }
     let inv = 1.0 / voxel as f64;
-    let cell = |p: &Point| -> [i64; 3] {
-        [(p.x as f64 * inv).floor() as i64, (p.y as f64 * inv).floor() as i64, (p.z as f64 * inv).floor() as i64]
-    };
     // Key = voxel index biased to non-negative and packed (ix, iy, iz), so keys order voxels
     // lexicographically; a cell too far from the origin to pack sends the cloud to the slower path.
     let mut keys = vec![0u64; points.len()];
     let all_pack = keys.par_chunks_mut(16_384).zip(points.par_chunks(16_384)).all(|(ks, ps)| pack_keys(ps, inv, ks));
     if !all_pack {
-        return downsample_by_sort(points, &cell);
+        return downsample_by_sort(points, tags, inv);
     }
     // Split the key range into parts of about equal point counts (quantiles of a sample of the keys); each
     // part is accumulated by one thread walking all points in input order and taking the keys in its range,
@@ -47,8 +49,9 @@ pub fn voxel_downsample(points: &[Point], voxel: f32) -> Vec<Point> {
             }
         })
         .collect();
-    let runs: Vec<Vec<Point>> = bounds.par_windows(2).map(|b| accumulate(points, &keys, b[0]..b[1])).collect();
-    runs.concat()
+    let runs: Vec<(Vec<Point>, Vec<PointTag>)> = bounds.par_windows(2).map(|b| accumulate(points, tags, &keys, b[0]..b[1])).collect();
+    let (points, tags): (Vec<_>, Vec<_>) = runs.into_iter().unzip();
+    (points.concat(), tags.concat())
 }
 
 /// Writes the packed key of each point's voxel to `keys`; false when some cell does not pack.
@@ -88,8 +91,9 @@ fn pack_keys_body(points: &[Point], inv: f64, keys: &mut [u64]) -> bool {
     fits
 }
 
-/// Centroids of the voxels whose keys fall in `range`, in key order; sums run in input order.
-fn accumulate(points: &[Point], keys: &[u64], range: std::ops::Range<u64>) -> Vec<Point> {
+/// Centroids (and, with `tags`, tag summaries) of the voxels whose keys fall in `range`, in key order; sums
+/// run in input order.
+fn accumulate(points: &[Point], tags: Option<&[PointTag]>, keys: &[u64], range: std::ops::Range<u64>) -> (Vec<Point>, Vec<PointTag>) {
     let mut table = VoxelTable::with_slots((points.len() / 16).next_power_of_two().max(1024));
     // Points of a depth map come row by row, so runs of points share a voxel: look the key up once per run
     // and sum the run in registers.
@@ -101,7 +105,8 @@ fn accumulate(points: &[Point], keys: &[u64], range: std::ops::Range<u64>) -> Ve
             continue;
         }
         let e = table.entry(k);
-        let Entry { mut sum, mut n, .. } = table.entries[e];
+        let Entry { mut sum, mut n, mut known, mut view, .. } = table.entries[e];
+        let run = i;
         while i < points.len() && keys[i] == k {
             let p = &points[i];
             sum[0] += p.x as f64;
@@ -110,11 +115,21 @@ fn accumulate(points: &[Point], keys: &[u64], range: std::ops::Range<u64>) -> Ve
             n += 1;
             i += 1;
         }
-        (table.entries[e].sum, table.entries[e].n) = (sum, n);
+        if let Some(tags) = tags {
+            for t in &tags[run..i] {
+                known += t.known as f64;
+                view = view.min(t.view);
+            }
+        }
+        (table.entries[e].sum, table.entries[e].n, table.entries[e].known, table.entries[e].view) = (sum, n, known, view);
     }
     let mut entries = table.entries;
     entries.sort_unstable_by_key(|e| e.key);
-    entries.iter().map(|e| centroid(e.sum, e.n)).collect()
+    let summary = match tags {
+        Some(_) => entries.iter().map(|e| PointTag { known: (e.known / e.n as f64) as f32, view: e.view }).collect(),
+        None => Vec::new(),
+    };
+    (entries.iter().map(|e| centroid(e.sum, e.n)).collect(), summary)
 }
 
 /// One occupied voxel being summed.
@@ -123,6 +138,9 @@ struct Entry {
     key: u64,
     sum: [f64; 3],
     n: u32,
+    /// Sum of the points' `known` and the lowest `view` (tagged downsampling only).
+    known: f64,
+    view: u8,
 }
 
 /// Open-addressing map from voxel key to its entry, grown at half load, in front of which a small
@@ -169,7 +187,7 @@ impl VoxelTable {
             }
         }
         let e = self.entries.len();
-        self.entries.push(Entry { key, sum: [0.0; 3], n: 0 });
+        self.entries.push(Entry { key, sum: [0.0; 3], n: 0, known: 0.0, view: u8::MAX });
         self.slots[s] = e as u32;
         if 2 * self.entries.len() > self.slots.len() {
             self.grow();
@@ -196,19 +214,26 @@ fn centroid(sum: [f64; 3], n: u32) -> Point {
 }
 
 /// The same result for clouds too wide to pack: sort point indices by (voxel, index).
-fn downsample_by_sort(points: &[Point], cell: &(dyn Fn(&Point) -> [i64; 3] + Sync)) -> Vec<Point> {
-    let (order, starts) = sorted_voxels(points, cell);
-    starts.windows(2).map(|w| centroid_of(points, &order[w[0]..w[1]])).collect()
-}
-
-/// Point indices sorted by (voxel, index), and where each voxel's run starts (plus the end).
-fn sorted_voxels(points: &[Point], cell: &(dyn Fn(&Point) -> [i64; 3] + Sync)) -> (Vec<u32>, Vec<usize>) {
-    let cells: Vec<[i64; 3]> = points.par_iter().map(cell).collect();
+fn downsample_by_sort(points: &[Point], tags: Option<&[PointTag]>, inv: f64) -> (Vec<Point>, Vec<PointTag>) {
+    let cells: Vec<[i64; 3]> =
+        points.par_iter().map(|p| [(p.x as f64 * inv).floor() as i64, (p.y as f64 * inv).floor() as i64, (p.z as f64 * inv).floor() as i64]).collect();
     let mut order: Vec<u32> = (0..points.len() as u32).collect();
     order.par_sort_by_key(|&i| (cells[i as usize], i));
     let mut starts: Vec<usize> = (0..order.len()).filter(|&k| k == 0 || cells[order[k] as usize] != cells[order[k - 1] as usize]).collect();
     starts.push(order.len());
-    (order, starts)
+    let runs = starts.windows(2).map(|w| &order[w[0]..w[1]]);
+    let summary = match tags {
+        Some(tags) => runs
+            .clone()
+            .map(|run| {
+                let known: f64 = run.iter().map(|&i| tags[i as usize].known as f64).sum();
+                let view = run.iter().map(|&i| tags[i as usize].view).min().expect("a voxel has a point");
+                PointTag { known: (known / run.len() as f64) as f32, view }
+            })
+            .collect(),
+        None => Vec::new(),
+    };
+    (runs.map(|run| centroid_of(points, run)).collect(), summary)
 }
 
 /// The centroid of the points `run` indexes, summed in the run's order.
@@ -236,22 +261,8 @@ pub struct PointTag {
 /// [`voxel_downsample`] of `points` (the same points, bit for bit, in the same order) with each voxel's
 /// [`PointTag`] summary: the mean of its points' `known`, the minimum of their `view`.
 pub fn voxel_downsample_tagged(points: &[Point], tags: &[PointTag], voxel: f32) -> (Vec<Point>, Vec<PointTag>) {
-    assert!(voxel.is_finite() && voxel > 0.0, "voxel size must be positive, got {voxel}");
     assert_eq!(points.len(), tags.len(), "one tag per point");
-    let inv = 1.0 / voxel as f64;
-    let cell = |p: &Point| -> [i64; 3] {
-        [(p.x as f64 * inv).floor() as i64, (p.y as f64 * inv).floor() as i64, (p.z as f64 * inv).floor() as i64]
-    };
-    let (order, starts) = sorted_voxels(points, &cell);
-    starts
-        .windows(2)
-        .map(|w| {
-            let run = &order[w[0]..w[1]];
-            let known: f64 = run.iter().map(|&i| tags[i as usize].known as f64).sum();
-            let view = run.iter().map(|&i| tags[i as usize].view).min().expect("a voxel has a point");
-            (centroid_of(points, run), PointTag { known: (known / run.len() as f64) as f32, view })
-        })
-        .unzip()
+    downsample(points, Some(tags), voxel)
 }
 
 #[cfg(test)]
@@ -335,19 +346,16 @@ mod tests {
         assert_eq!(voxel_downsample(&pts, 0.025).len(), 2);
     }
 
-    #[test]
-    fn tagged_downsampling_keeps_the_points_and_summarises_the_tags() {
-        let mut r = Rng::new(17);
-        let pts: Vec<Point> = (0..20_000)
-            .map(|_| Point::new(r.uniform_range(-1.0, 1.0) as f32, r.uniform_range(-1.0, 1.0) as f32, r.uniform_range(0.5, 2.5) as f32))
-            .collect();
+    /// Tagged downsampling against an independent summary (a BTreeMap keyed by voxel index, in the same
+    /// lexicographic order), with tags that mix known and filled points and several views per voxel.
+    fn check_tagged(pts: &[Point], voxel: f32) {
         let tags: Vec<PointTag> = (0..pts.len()).map(|i| PointTag { known: (i % 3 != 0) as u8 as f32, view: (i % 5) as u8 }).collect();
-        let (out, summary) = voxel_downsample_tagged(&pts, &tags, 0.1);
-        assert_eq!(out, voxel_downsample(&pts, 0.1), "the same points as the untagged downsampling");
-        // Independent summary: a BTreeMap keyed by voxel index, in the same (lexicographic) order.
+        let (out, summary) = voxel_downsample_tagged(pts, &tags, voxel);
+        assert_eq!(out, voxel_downsample(pts, voxel), "the same points as the untagged downsampling");
         let mut m: BTreeMap<(i64, i64, i64), (f64, f64, u8)> = BTreeMap::new();
         for (p, t) in pts.iter().zip(&tags) {
-            let k = ((p.x as f64 / 0.1f32 as f64).floor() as i64, (p.y as f64 / 0.1f32 as f64).floor() as i64, (p.z as f64 / 0.1f32 as f64).floor() as i64);
+            let v = voxel as f64;
+            let k = ((p.x as f64 / v).floor() as i64, (p.y as f64 / v).floor() as i64, (p.z as f64 / v).floor() as i64);
             let e = m.entry(k).or_insert((0.0, 0.0, u8::MAX));
             e.0 += t.known as f64;
             e.1 += 1.0;
@@ -356,5 +364,23 @@ mod tests {
         let expected: Vec<PointTag> = m.values().map(|e| PointTag { known: (e.0 / e.1) as f32, view: e.2 }).collect();
         assert_eq!(summary, expected);
         assert!(summary.iter().any(|t| t.known > 0.0 && t.known < 1.0), "some voxels mix known and filled points");
+    }
+
+    #[test]
+    fn tagged_downsampling_keeps_the_points_and_summarises_the_tags() {
+        let mut r = Rng::new(17);
+        let random: Vec<Point> = (0..20_000)
+            .map(|_| Point::new(r.uniform_range(-1.0, 1.0) as f32, r.uniform_range(-1.0, 1.0) as f32, r.uniform_range(0.5, 2.5) as f32))
+            .collect();
+        check_tagged(&random, 0.1);
+        // Scan order (runs of points share a voxel), split into key ranges on several threads.
+        let scan: Vec<Point> =
+            (0..300).flat_map(|r| (0..400).map(move |c| Point::new(c as f32 * 0.003 - 0.6, r as f32 * 0.003 - 0.45, 2.0))).collect();
+        for threads in [1, 3] {
+            rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap().install(|| check_tagged(&scan, 0.025));
+        }
+        // Too wide to pack (±2 km in 1 mm voxels): the fallback path; two points per voxel.
+        let wide: Vec<Point> = (0..3000).map(|i| Point::new((i / 2) as f32 * 3.0 - 2250.0, (i % 2) as f32 * 0.0004, 1.0)).collect();
+        check_tagged(&wide, 0.001);
     }
 }

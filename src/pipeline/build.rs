@@ -141,7 +141,7 @@ fn build_stages(
     }
     .into_iter();
     let mut stages = vec![
-        StageSpec::replicated(n, || Ingest { catalog: catalog.clone(), working: w.clone(), strict, frames: frames.clone() }),
+        StageSpec::replicated(n, || Ingest { catalog: catalog.clone(), working: w.clone(), strict, frames: frames.clone(), voxel: config.voxelize.voxel }),
         StageSpec::replicated(n, || {
             config.pose.build(&config.correct.condition, w.depth_range(), w.crop_box, config.voxelize.voxel, config.validate.radius)
         }),

@@ -1,11 +1,12 @@
-//! Ingest: decode the unit's frame, map it to the working resolution, back-project the scene memory; and
+//! Ingest: decode the unit's frame, map it to the working resolution, back-project the scene memory and
+//! voxelize it into the source cloud (once per frame: every sample of a frame has the same source); and
 //! the `[working]` config section (resolution, intrinsics map, depth range, crop box) that every later
 //! stage also reads.
 
 use super::frame_cache::FrameCache;
 use super::PairUnit;
 use crate::error::{Error, Result};
-use crate::geometry::{backproject, AxisBox, DepthMap, DepthRange, Intrinsics, Point, ResizeCrop};
+use crate::geometry::{backproject, voxel_downsample, AxisBox, DepthMap, DepthRange, Intrinsics, Point, ResizeCrop};
 use crate::runtime::Stage;
 use crate::shards::row::Status;
 use crate::sources::{Catalog, Frame};
@@ -89,6 +90,8 @@ pub struct PreparedFrame {
     depth: DepthMap,
     k: Intrinsics,
     memory: Vec<Point>,
+    /// `memory` voxel-downsampled: the pair's source cloud.
+    source_points: Vec<Point>,
 }
 
 /// Decodes frames; bad input becomes an `input_error` unit (or a fatal error under `--strict`). The
@@ -98,6 +101,8 @@ pub struct Ingest {
     pub working: WorkingConfig,
     pub strict: bool,
     pub frames: Arc<FrameCache<PreparedFrame>>,
+    /// Voxel edge of the source cloud, metres (`voxelize.voxel`).
+    pub voxel: f32,
 }
 
 impl Ingest {
@@ -108,7 +113,8 @@ impl Ingest {
         if memory.is_empty() {
             return Err(Error::input(&frame.depth_path, "depth map has no valid pixel inside the depth range and crop box"));
         }
-        Ok(PreparedFrame { source_path: frame.depth_path.display().to_string(), source_hash: frame.content_hash, depth, k, memory })
+        let source_points = voxel_downsample(&memory, self.voxel);
+        Ok(PreparedFrame { source_path: frame.depth_path.display().to_string(), source_hash: frame.content_hash, depth, k, memory, source_points })
     }
 
     fn prepare(&self, unit: &mut PairUnit) -> Result<()> {
@@ -129,6 +135,7 @@ impl Ingest {
         unit.k = Some(f.k);
         unit.source_depth = Some(f.depth.clone());
         unit.memory = f.memory.clone();
+        unit.source_points = f.source_points.clone();
         Ok(())
     }
 }

@@ -37,7 +37,7 @@ pub struct PairUnit {
     /// With successive views: all views fused, in the first view's camera frame, cropped to the box, with
     /// each point's provenance (the voxelize stage takes it instead of back-projecting `target_depth`).
     pub fused_target: Option<(Vec<Point>, Vec<PointTag>)>,
-    /// Voxelized clouds, each in its own camera frame.
+    /// Voxelized clouds, each in its own camera frame (the source's made by ingest, the target's by voxelize).
     pub source_points: Vec<Point>,
     pub target_points: Vec<Point>,
     /// Provenance of each voxelized target point (known share, first view).

@@ -1,10 +1,10 @@
-//! Voxelize: both clouds cropped to the box in their own camera frames and voxel-downsampled; and the
-//! `[voxelize]` config section.
+//! Voxelize: the target cloud cropped to the box in its camera frame and voxel-downsampled (ingest made the
+//! source cloud the same way, once per frame), both checked for size; and the `[voxelize]` config section.
 
 use super::ingest::WorkingConfig;
 use super::PairUnit;
 use crate::error::{Error, Result};
-use crate::geometry::{backproject_with_pixels, voxel_downsample, voxel_downsample_tagged, AxisBox, DepthMap, DepthRange, Intrinsics, Point, PointTag};
+use crate::geometry::{backproject_with_pixels, voxel_downsample_tagged, AxisBox, DepthMap, DepthRange, Intrinsics, Point, PointTag};
 use crate::runtime::Stage;
 use crate::shards::row::Status;
 use serde::{Deserialize, Serialize};
@@ -62,9 +62,7 @@ impl Stage<PairUnit> for Voxelize {
                 self.crop_box.crop_with(&points, &tags)
             }
         };
-        let (s, (t, tags)) =
-            rayon::join(|| voxel_downsample(&unit.memory, self.voxel), || voxel_downsample_tagged(&target_points, &tags, self.voxel));
-        unit.source_points = s;
+        let (t, tags) = voxel_downsample_tagged(&target_points, &tags, self.voxel);
         unit.target_points = t;
         unit.target_tags = tags;
         unit.memory = Vec::new(); // no longer needed: keep items small
