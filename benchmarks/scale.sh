@@ -97,12 +97,13 @@ if part loaders; then
 fi
 
 array() { # out: the build as 8 workers of one thread each; prints the time, compares the rows
-  local out=$1 i
+  local out=$1 i pids=()
   t=$(now)
   for i in 0 1 2 3 4 5 6 7; do
     build "$out" 1 --worker "$i" --workers 8 > "$W/array-$i.log" 2>&1 &
+    pids+=($!)
   done
-  wait
+  wait "${pids[@]}" # not a bare `wait`: the S3 server runs in the background too
   echo "8 workers into $out: $(since "$t") s"
   [[ "$(rows "$W/ds")" == "$(rows "$out")" ]] && echo "  the committed rows equal the one-process build's" || echo "  rows DIFFER from the one-process build"
   t=$(now); build "$out" > /dev/null
