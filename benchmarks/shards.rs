@@ -12,7 +12,7 @@ use support::store;
 use pointreggpt::geometry::Point;
 use pointreggpt::rng::Rng;
 use pointreggpt::shards::row::{PairRow, StageTiming, Status};
-use pointreggpt::shards::{batch_to_pairs, pairs_schema, pairs_to_batch, read_parquet_file, write_parquet_bytes};
+use pointreggpt::shards::{batch_to_pairs, pairs_schema, pairs_to_batch, read_parquet_file, write_parquet_bytes, ROW_GROUP_ROWS};
 use std::time::Instant;
 
 /// A realistic row: two ~10k-point clouds (2.5 cm voxels of a 256×256 view) and three depth PNGs.
@@ -77,7 +77,7 @@ fn main() {
     for _ in 0..reps {
         let t = Instant::now();
         let batch = pairs_to_batch(&rows).unwrap();
-        bytes = write_parquet_bytes(&pairs_schema(), &[batch]).unwrap();
+        bytes = write_parquet_bytes(&pairs_schema(), &[batch], ROW_GROUP_ROWS).unwrap();
         std::fs::write(&path, &bytes).unwrap();
         write_ms.push(t.elapsed().as_secs_f64() * 1e3);
     }

@@ -100,7 +100,7 @@ fn write_dataset(root: &Path) -> Vec<PairRow> {
         ds.commit_pairs(shard, a, b - a, &rows[a as usize..b as usize]).unwrap();
     }
     let extra: Vec<PairRow> = (19..26).map(row).collect();
-    let bytes = write_parquet_bytes(&pairs_schema(), &[pairs_to_batch(&extra).unwrap()]).unwrap();
+    let bytes = write_parquet_bytes(&pairs_schema(), &[pairs_to_batch(&extra).unwrap()], pointreggpt::shards::ROW_GROUP_ROWS).unwrap();
     std::fs::write(ds.shard_path(PAIRS_TABLE, 3), &bytes).unwrap();
     std::fs::write(ds.tmp_dir().join("otherhost~1~pairs-000004.parquet~1.tmp"), &bytes).unwrap();
     rows
