@@ -5,7 +5,7 @@ use super::{streams, PairUnit};
 use crate::error::{Error, Result};
 use super::correct::correct_condition;
 use crate::correction::{CorrectionConfig, Corrector};
-use crate::geometry::{project_zbuffer, view_overlap, voxel_downsample, AxisBox, DepthRange, Intrinsics, PivotPoseSampler, Point};
+use crate::geometry::{project_zbuffer, view_overlap, AxisBox, DepthRange, Intrinsics, PivotPoseSampler, Point};
 use crate::rng::Rng;
 use crate::runtime::Stage;
 use nalgebra::Isometry3;
@@ -164,7 +164,7 @@ impl Stage<PairUnit> for PoseSampling {
             None => (self.sampler.sample(&mut rng), 1),
             Some((t, estimate)) => {
                 let k = unit.k.expect("ingest sets the intrinsics");
-                sample_towards_bin(&self.sampler, t, &unit.memory, &k, estimate, &mut rng)
+                sample_towards_bin(&self.sampler, t, &unit.source_points, &unit.memory, &k, estimate, &mut rng)
             }
         };
         unit.t_target_from_source = pose;
@@ -187,11 +187,13 @@ pub fn assigned_bin(target: &OverlapTarget, rng: &mut Rng) -> usize {
 }
 
 /// Picks the unit's bin ([`assigned_bin`]), then draws poses until the estimated overlap of `memory` (the
-/// source points in the crop box, full resolution) falls in it, adapting the motion scale after each miss;
+/// source points in the crop box, full resolution; `probes`: `memory` voxelized at `estimate.voxel`, i.e.
+/// the source cloud ingest made) falls in it, adapting the motion scale after each miss;
 /// after `max_draws` keeps the draw closest to the bin. Returns the pose and the number of draws.
 pub fn sample_towards_bin(
     sampler: &PivotPoseSampler,
     target: &OverlapTarget,
+    probes: &[Point],
     memory: &[Point],
     k: &Intrinsics,
     estimate: &OverlapEstimate,
@@ -199,12 +201,11 @@ pub fn sample_towards_bin(
 ) -> (Isometry3<f64>, u32) {
     let bin = assigned_bin(target, rng);
     let (lo, hi) = (target.bin_edges[bin], target.bin_edges[bin + 1]);
-    let probes = voxel_downsample(memory, estimate.voxel);
     let mut best = (f64::INFINITY, Isometry3::identity());
     let mut scale = 1.0;
     for draw in 1..=target.max_draws {
         let pose = sampler.scaled(scale).sample(rng);
-        let c = estimate.of(&probes, memory, &pose, k);
+        let c = estimate.of(probes, memory, &pose, k);
         if c >= lo && c < hi {
             return (pose, draw);
         }
@@ -220,6 +221,7 @@ pub fn sample_towards_bin(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::geometry::voxel_downsample;
 
     #[test]
     fn draws_land_in_the_assigned_bin_and_the_histogram_follows_the_weights() {
@@ -235,7 +237,7 @@ mod tests {
         let mut counts = [0usize; 2];
         for s in 0..400u64 {
             let mut rng = Rng::new(s);
-            let (pose, draws) = sample_towards_bin(&sampler, &target, &memory, &k, &estimate, &mut rng);
+            let (pose, draws) = sample_towards_bin(&sampler, &target, &probes, &memory, &k, &estimate, &mut rng);
             let c = estimate.of(&probes, &memory, &pose, &k);
             assert!(draws < 200, "unit {s} never reached its bin");
             assert!((0.1..0.9).contains(&c));
