@@ -129,7 +129,16 @@ fn a_reprojection_only_target_is_all_known() {
     for row in &rows {
         assert_eq!(row.target_known_share.len(), row.target_points.len());
         assert!(row.target_known_share.iter().all(|&s| s == 1.0), "{}: a point without a fill is re-projected", row.pair_key);
+        // Without a fill the stored target depth is the condition (pack writes its bytes once and reuses
+        // them), and it is still the target cloud's depth: nearly every target point lies in a voxel the
+        // stored target PNG back-projects into.
+        let target = decode_depth_png(&row.target_depth_png, Path::new("target_depth_png")).unwrap();
+        let condition = decode_depth_png(&row.condition_depth_png, Path::new("condition_depth_png")).unwrap();
+        assert_eq!(target.data, condition.data, "{}", row.pair_key);
+        assert!(target.data.iter().any(|&mm| mm > 0), "{}: an empty target", row.pair_key);
     }
+    let (points, _, far, ..) = compare(&rows, 0);
+    assert!(far * 50 < points, "{far} of {points} target points outside the stored target depth's voxels");
 }
 
 #[test]

@@ -65,12 +65,22 @@ impl Stage<PairUnit> for Pack {
 
     fn process(&mut self, u: &mut PairUnit) -> Result<()> {
         let k = u.k.map(|k| k.as_vector()).unwrap_or([0.0; 4]);
-        let png = |d: &Option<DepthMap>| -> Result<Vec<u8>> {
-            match d {
-                Some(d) if self.depth_maps => encode_depth_png(d.width(), d.height(), &d.to_raw(1000.0)),
-                _ => Ok(Vec::new()),
+        let raw = |d: &Option<DepthMap>| match d {
+            Some(d) if self.depth_maps => Some((d.width(), d.height(), d.to_raw(1000.0))),
+            _ => None,
+        };
+        let png = |r: &Option<(u32, u32, Vec<u16>)>| -> Result<Vec<u8>> {
+            match r {
+                Some((w, h, raw)) => encode_depth_png(*w, *h, raw),
+                None => Ok(Vec::new()),
             }
         };
+        let condition_raw = raw(&u.condition);
+        let target_raw = raw(&u.target_depth);
+        let condition_depth_png = png(&condition_raw)?;
+        // Without a fill the target is the condition: its stored millimetres are the same, so are its bytes.
+        let target_depth_png =
+            if target_raw == condition_raw { condition_depth_png.clone() } else { png(&target_raw)? };
         let known_mask_png = if self.depth_maps && !u.known.is_empty() {
             encode_mask_png(&u.known, self.size, self.size)?
         } else {
@@ -99,9 +109,9 @@ impl Stage<PairUnit> for Pack {
             target_view: std::mem::take(&mut u.target_tags).iter().map(|t| t.view).collect(),
             overlap_source: u.overlap.source,
             overlap_target: u.overlap.target,
-            source_depth_png: png(&u.source_depth)?,
-            condition_depth_png: png(&u.condition)?,
-            target_depth_png: png(&u.target_depth)?,
+            source_depth_png: png(&raw(&u.source_depth))?,
+            condition_depth_png,
+            target_depth_png,
             known_mask_png,
             config_hash: self.config_hash.clone(),
             code_version: self.code_version.clone(),
