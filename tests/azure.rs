@@ -423,7 +423,7 @@ fn a_missing_container_and_an_unreachable_azurite_fail_clearly_before_any_work()
 
 #[test]
 fn repair_on_azure_leaves_live_writers_alone_and_removes_stale_records_and_planted_orphans() {
-    use pointreggpt::atomic::hostname;
+    use support::repair::{Planted, Running};
     let w = World::new("repair");
     let e = w.endpoint();
     let config = w.dir.path().join("c.toml");
@@ -438,75 +438,27 @@ fn repair_on_azure_leaves_live_writers_alone_and_removes_stale_records_and_plant
     let put = |key: &str, text: &str| peer(&e, &["put", &e, "repair", &format!("ds/{key}"), text]);
     let copy = |object: &str| peer(&e, &["copy", &e, "repair", &format!("ds/{shard}"), &format!("ds/shards/{object}")]);
 
-    // A live writer on this host (a process that runs: `sleep`): one blob mid block upload, one whole
-    // blob put but not yet committed. Both have their records.
-    struct Running(std::process::Child);
-    impl Drop for Running {
-        fn drop(&mut self) {
-            let _ = self.0.kill();
-            let _ = self.0.wait();
-        }
-    }
-    let mut writer = Running(support::command("sleep").arg("600").spawn().unwrap());
-    let (host, pid) = (hostname(), writer.0.id());
-    let live_blocks = "pairs-000005-1111111111111111.parquet";
-    let live_blocks_record = format!("{host}~{pid}~{live_blocks}~1.tmp");
-    peer(&e, &["abandon", &e, "repair", "ds", &live_blocks_record, live_blocks]);
-    let live_put = "pairs-000006-2222222222222222.parquet";
-    let live_put_record = format!("{host}~{pid}~{live_put}~2.tmp");
-    put(&format!(".tmp/{live_put_record}"), &record(live_put));
-    copy(live_put);
-    // A writer of another host: its record is not stale from here (for an hour).
-    let remote = "pairs-000007-3333333333333333.parquet";
-    let remote_record = format!("elsewhere.example~{pid}~{remote}~3.tmp");
-    put(&format!(".tmp/{remote_record}"), &record(remote));
-    copy(remote);
-    // A writer of this host that died (a pid above Linux's pid_max, never running) after putting its blob.
-    let dead = "pairs-000001-4444444444444444.parquet";
-    let dead_record = format!("{host}~{}~{dead}~4.tmp", 4_194_304 + 9);
-    put(&format!(".tmp/{dead_record}"), &record(dead));
-    copy(dead);
-    // A whole valid shard blob that no record and no entry names (a writer that lost a race and could
-    // not delete it): a planted orphan.
-    let orphan = "pairs-000002-5555555555555555.parquet";
-    copy(orphan);
-    let live_upload = vec![format!("ds/shards/{live_blocks}")];
+    // The scenario of tests/support/repair.rs, planted in Azure's terms: the live writer's unfinished
+    // upload is a blob with uncommitted blocks only; every other writer has put its whole blob.
+    let mut writer = Running::start();
+    let p = Planted::new(writer.0.id());
+    peer(&e, &["abandon", &e, "repair", "ds", &p.live_upload_record, p.live_upload]);
+    p.plant(|record_name, object| drop(put(&format!(".tmp/{record_name}"), &record(object))), |object| drop(copy(object)));
+    let live_upload = vec![format!("ds/shards/{}", p.live_upload)];
     assert_eq!(uncommitted(&e, "repair"), live_upload);
 
-    let report = ok(run(&e, &["verify", url]).output().unwrap());
-    for (name, says) in [
-        (dead_record.as_str(), "stale temporary file"),
-        (live_blocks_record.as_str(), "temporary file of a running or remote process"),
-        (live_put_record.as_str(), "temporary file of a running or remote process"),
-        (remote_record.as_str(), "temporary file of a running or remote process"),
-        (orphan, "uncommitted shard file"),
-    ] {
-        assert!(report.lines().any(|l| l.contains(name) && l.contains(says)), "verify does not list {name} as {says}:\n{report}");
-    }
+    p.assert_listed(&ok(run(&e, &["verify", url]).output().unwrap()));
     let repaired = ok(run(&e, &["verify", "--repair", url]).output().unwrap());
-    let after = objects(&e, "repair", "ds");
-    let has = |key: &str| after.contains_key(key);
-    // The live writer's staged blocks, blob and records are untouched, and so are the remote writer's.
     assert_eq!(uncommitted(&e, "repair"), live_upload, "repair dropped a live writer's block upload:\n{repaired}");
-    for key in [format!(".tmp/{live_blocks_record}"), format!(".tmp/{live_put_record}"), format!("shards/{live_put}"), format!(".tmp/{remote_record}"), format!("shards/{remote}")] {
-        assert!(has(&key), "repair removed {key} of a running writer:\n{repaired}");
-    }
-    // The dead writer's record and blob, and the planted orphan, are gone.
-    for key in [format!(".tmp/{dead_record}"), format!("shards/{dead}"), format!("shards/{orphan}")] {
-        assert!(!has(&key), "repair left {key}:\n{repaired}");
-    }
-    // Committed data untouched: every blob that was there before, the same bytes (ETag).
-    for (key, v) in &before {
-        assert_eq!(after.get(key), Some(v), "repair changed the committed blob {key}");
-    }
+    p.assert_repaired(&before, &objects(&e, "repair", "ds"), &repaired);
     assert_eq!(digests(url), committed);
     assert!(Dataset::open(url).unwrap().verify().unwrap().is_ok());
 
     // The writer dies: now its records are stale, and repair drops its blocks and removes its blobs.
     writer.0.kill().unwrap();
     writer.0.wait().unwrap();
-    peer(&e, &["delete", &e, "repair", &format!("ds/.tmp/{remote_record}")]);
+    peer(&e, &["delete", &e, "repair", &format!("ds/.tmp/{}", p.remote_record)]);
     assert_clean(&e, "repair", "ds");
     assert_eq!(digests(url), committed);
-    assert!(!objects(&e, "repair", "ds").contains_key(&format!("shards/{remote}")), "an unnamed blob stayed");
+    assert!(!objects(&e, "repair", "ds").contains_key(&format!("shards/{}", p.remote)), "an unnamed blob stayed");
 }

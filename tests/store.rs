@@ -439,7 +439,7 @@ fn a_store_that_fails_for_a_few_seconds_mid_build_is_retried_and_the_build_compl
 
 #[test]
 fn repair_leaves_live_writers_alone_and_removes_stale_records_and_planted_orphans() {
-    use pointreggpt::atomic::hostname;
+    use support::repair::{Planted, Running};
     let w = World::new("repair");
     let moto = &w.moto;
     let e = moto.endpoint();
@@ -456,79 +456,31 @@ fn repair_leaves_live_writers_alone_and_removes_stale_records_and_planted_orphan
         std::fs::write(&file, text).unwrap();
         peer(&e, &["put", &e, "repair", &format!("ds/{key}"), file.to_str().unwrap()]);
     };
-    let record = |object: &str, upload: Option<&str>| serde_json::json!({ "object": object, "upload_id": upload }).to_string();
+    let record = |object: &str| serde_json::json!({ "object": object, "upload_id": null }).to_string();
     let copy = |object: &str| peer(&e, &["copy", &e, "repair", &format!("ds/{shard}"), &format!("ds/shards/{object}")]);
 
-    // A live writer on this host (a process that runs: `sleep`): one upload mid multipart, one whole
-    // object put but not yet committed. Both have their records.
-    struct Running(std::process::Child);
-    impl Drop for Running {
-        fn drop(&mut self) {
-            let _ = self.0.kill();
-            let _ = self.0.wait();
-        }
-    }
-    let mut writer = Running(support::command("sleep").arg("600").spawn().unwrap());
-    let (host, pid) = (hostname(), writer.0.id());
-    let live_multipart = "pairs-000005-1111111111111111.parquet";
-    let live_multipart_record = format!("{host}~{pid}~{live_multipart}~1.tmp");
-    peer(&e, &["abandon", &e, "repair", "ds", &live_multipart_record, live_multipart]);
-    let live_put = "pairs-000006-2222222222222222.parquet";
-    let live_put_record = format!("{host}~{pid}~{live_put}~2.tmp");
-    put(&format!(".tmp/{live_put_record}"), &record(live_put, None));
-    copy(live_put);
-    // A writer of another host: its record is not stale from here (for an hour).
-    let remote = "pairs-000007-3333333333333333.parquet";
-    let remote_record = format!("elsewhere.example~{pid}~{remote}~3.tmp");
-    put(&format!(".tmp/{remote_record}"), &record(remote, None));
-    copy(remote);
-    // A writer of this host that died (a pid that never runs) after putting its object: stale.
-    let dead = "pairs-000001-4444444444444444.parquet";
-    let dead_record = format!("{host}~{}~{dead}~4.tmp", 4_194_304 + 9);
-    put(&format!(".tmp/{dead_record}"), &record(dead, None));
-    copy(dead);
-    // A completed object no record and no entry names (a writer that lost a race and could not delete
-    // its object): a planted orphan, a whole valid shard.
-    let orphan = "pairs-000002-5555555555555555.parquet";
-    copy(orphan);
+    // The scenario of tests/support/repair.rs, planted in S3's terms: the live writer's unfinished
+    // upload is a multipart upload; every other writer has put its whole object.
+    let mut writer = Running::start();
+    let p = Planted::new(writer.0.id());
+    peer(&e, &["abandon", &e, "repair", "ds", &p.live_upload_record, p.live_upload]);
+    p.plant(|record_name, object| put(&format!(".tmp/{record_name}"), &record(object)), |object| drop(copy(object)));
     assert_eq!(peer(&e, &["uploads", &e, "repair"]), "1");
 
-    let report = ok(run(&e, &["verify", url]).output().unwrap());
-    for (name, says) in [
-        (dead_record.as_str(), "stale temporary file"),
-        (live_multipart_record.as_str(), "temporary file of a running or remote process"),
-        (live_put_record.as_str(), "temporary file of a running or remote process"),
-        (remote_record.as_str(), "temporary file of a running or remote process"),
-        (orphan, "uncommitted shard file"),
-    ] {
-        assert!(report.lines().any(|l| l.contains(name) && l.contains(says)), "verify does not list {name} as {says}:\n{report}");
-    }
+    p.assert_listed(&ok(run(&e, &["verify", url]).output().unwrap()));
     let repaired = ok(run(&e, &["verify", "--repair", url]).output().unwrap());
-    let after = objects(&e, "repair", "ds");
-    let has = |key: &str| after.contains_key(key);
-    // The live writer's upload, object and records are untouched, and so is the remote writer's.
     assert_eq!(peer(&e, &["uploads", &e, "repair"]), "1", "repair aborted a live writer's multipart upload:\n{repaired}");
-    for key in [format!(".tmp/{live_multipart_record}"), format!(".tmp/{live_put_record}"), format!("shards/{live_put}"), format!(".tmp/{remote_record}"), format!("shards/{remote}")] {
-        assert!(has(&key), "repair removed {key} of a running writer:\n{repaired}");
-    }
-    // The dead writer's record and object, and the planted orphan, are gone.
-    for key in [format!(".tmp/{dead_record}"), format!("shards/{dead}"), format!("shards/{orphan}")] {
-        assert!(!has(&key), "repair left {key}:\n{repaired}");
-    }
-    // Committed data untouched: every object that was there before, the same bytes (ETag).
-    for (key, v) in &before {
-        assert_eq!(after.get(key), Some(v), "repair changed the committed object {key}");
-    }
+    p.assert_repaired(&before, &objects(&e, "repair", "ds"), &repaired);
     assert_eq!(digests(url), committed);
     assert!(Dataset::open(url).unwrap().verify().unwrap().is_ok());
 
     // The writer dies: now its records are stale, and repair aborts its upload and removes its objects.
     writer.0.kill().unwrap();
     writer.0.wait().unwrap();
-    peer(&e, &["delete", &e, "repair", &format!("ds/.tmp/{remote_record}")]);
+    peer(&e, &["delete", &e, "repair", &format!("ds/.tmp/{}", p.remote_record)]);
     assert_clean(&e, "repair", "ds");
     assert_eq!(digests(url), committed);
-    assert!(!objects(&e, "repair", "ds").contains_key(&format!("shards/{remote}")), "an unnamed object stayed");
+    assert!(!objects(&e, "repair", "ds").contains_key(&format!("shards/{}", p.remote)), "an unnamed object stayed");
 }
 
 #[test]

@@ -2,6 +2,7 @@
 #![allow(dead_code)]
 
 pub mod azure;
+pub mod repair;
 pub mod store;
 
 use std::path::PathBuf;
