@@ -20,6 +20,7 @@ pub mod registration;
 pub mod preview;
 pub mod rng;
 pub mod runtime;
+pub mod scene;
 pub mod shards;
 pub mod sources;
 pub mod stages;

@@ -351,7 +351,7 @@ fn targets_as_stored(drawn: &[Drawn], pairs: &[TrainPair], what: &str) {
 
 /// Positives drawn on filled target points (stored `target_known_share` < 0.5), indices into the stored target.
 fn filled_positives(drawn: &[Drawn], pairs: &[TrainPair]) -> usize {
-    drawn.iter().map(|d| d.target.iter().filter(|&&k| pairs[d.pair].target_known[k] < 0.5).count()).sum()
+    drawn.iter().map(|d| d.target.iter().filter(|&&k| pairs[d.pair].target_observed[k] < 0.5).count()).sum()
 }
 
 #[test]
@@ -377,7 +377,7 @@ fn known_positives_draws_positives_only_on_reprojected_points_and_changes_nothin
     assert_eq!(summary, summary_known);
     assert_eq!(first_draws(&base), first_draws(&known));
     for (b, k) in base.iter().zip(&known).filter(|(b, _)| b.slot == 0) {
-        let kept: Vec<(usize, usize)> = b.source.iter().copied().zip(b.target.iter().copied()).filter(|&(_, t)| pairs[b.pair].target_known[t] >= 0.5).collect();
+        let kept: Vec<(usize, usize)> = b.source.iter().copied().zip(b.target.iter().copied()).filter(|&(_, t)| pairs[b.pair].target_observed[t] >= 0.5).collect();
         let drawn: Vec<(usize, usize)> = k.source.iter().copied().zip(k.target.iter().copied()).collect();
         assert!(drawn.starts_with(&kept), "step {}: {kept:?} are not the first of {drawn:?}", b.step);
     }
@@ -397,7 +397,7 @@ fn drop_filled_keeps_filled_points_out_of_the_clouds_and_changes_nothing_else() 
     for d in &dropped {
         let p = &pairs[d.pair];
         let known: std::collections::HashSet<[u32; 3]> =
-            p.target.iter().zip(&p.target_known).filter(|(_, &s)| s >= 0.5).map(|(q, _)| xyz(q).map(f32::to_bits)).collect();
+            p.target.iter().zip(&p.target_observed).filter(|(_, &s)| s >= 0.5).map(|(q, _)| xyz(q).map(f32::to_bits)).collect();
         assert_eq!(d.target_points, known.len(), "{}: target cloud of {} points, {} re-projected", d.key, d.target_points, known.len());
         fewer += (d.target_points < p.target.len()) as usize;
         for q in &d.target_xyz {

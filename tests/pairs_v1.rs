@@ -41,7 +41,7 @@ fn file_version(path: &Path) -> String {
 }
 
 fn without_provenance(rows: &[PairRow]) -> Vec<PairRow> {
-    rows.iter().map(|r| PairRow { target_known_share: Vec::new(), target_view: Vec::new(), timings: Vec::new(), ..r.clone() }).collect()
+    rows.iter().map(|r| PairRow { target_known_share: Vec::new(), target_scene_share: Vec::new(), target_view: Vec::new(), timings: Vec::new(), ..r.clone() }).collect()
 }
 
 #[test]
@@ -86,10 +86,10 @@ fn a_version_1_dataset_is_read_exported_verified_and_resumed() {
     assert_eq!(digests(&resumed), digests(&old_rows), "the resumed shard holds the rows the old code wrote");
     assert!(run_ok(&["verify", ds.to_str().unwrap()]).contains("pairs: 3 shards intact, 6 rows"));
 
-    // A fresh build of the same config: version 2, the same pairs, and provenance.
-    let fresh = dir.path().join("v2");
+    // A fresh build of the same config: the current version, the same pairs, and provenance.
+    let fresh = dir.path().join("current");
     run_ok(&["build", config.to_str().unwrap(), "--out", fresh.to_str().unwrap(), "--no-progress"]);
-    assert_eq!(file_version(&fresh.join("shards/pairs-000000.parquet")), "pairs/2");
+    assert_eq!(file_version(&fresh.join("shards/pairs-000000.parquet")), pointreggpt::shards::SCHEMA_VERSION);
     let new_rows = Dataset::open(&fresh).unwrap().read_pairs().unwrap();
     assert!(new_rows.iter().filter(|r| !r.target_points.is_empty()).all(|r| r.target_known_share.len() == r.target_points.len()));
     assert_eq!(without_provenance(&new_rows), without_provenance(&old_rows), "the same pairs as the old code");
@@ -108,6 +108,7 @@ fn row(u: u64) -> PairRow {
         pose_draws: 3,
         target_points: (0..n).map(|i| pointreggpt::geometry::Point::new(i as f32, 0.5, 1.0)).collect(),
         target_known_share: (0..n).map(|i| (i % 3) as f32 / 2.0).collect(),
+        target_scene_share: (0..n).map(|i| (i % 2) as f32 / 4.0).collect(),
         target_view: (0..n).map(|i| (i % 2) as u8).collect(),
         ..PairRow::default()
     }
@@ -116,7 +117,8 @@ fn row(u: u64) -> PairRow {
 #[test]
 fn version_1_batches_convert_both_ways_bit_for_bit() {
     use arrow::array::{Array, Int64Array, UInt64Array};
-    use pointreggpt::shards::pairs_v1::{downgrade, is_v1, to_current};
+    use pointreggpt::shards::pairs_versions::{downgrade, is_v1, to_current};
+    use pointreggpt::shards::SCHEMA_VERSION_1;
     use pointreggpt::shards::{batch_to_pairs, pairs_to_batch};
     let rows: Vec<PairRow> = (0..6).map(row).collect();
     let v2 = pairs_to_batch(&rows).unwrap();
@@ -126,14 +128,14 @@ fn version_1_batches_convert_both_ways_bit_for_bit() {
     assert_eq!(seeds.value(1), -6);
     assert_eq!(batch_to_pairs(&v2).unwrap(), rows, "a version-2 round trip is exact");
     // Down to version 1: the unsigned values themselves, no provenance columns.
-    let v1 = downgrade(&v2).unwrap();
+    let v1 = downgrade(&v2, SCHEMA_VERSION_1).unwrap();
     assert!(is_v1(&v1));
     assert_eq!(v1.num_columns(), 28);
     let seeds = v1.column_by_name("seed").unwrap().as_any().downcast_ref::<UInt64Array>().unwrap();
     assert_eq!(seeds.values().to_vec(), rows.iter().map(|r| r.seed).collect::<Vec<_>>());
     // Read back: the same rows without provenance; and up and down again gives the same batch.
     assert_eq!(batch_to_pairs(&v1).unwrap(), without_provenance_keep_timings(&rows));
-    assert_eq!(downgrade(&to_current(&v1).unwrap()).unwrap(), v1);
+    assert_eq!(downgrade(&to_current(&v1).unwrap(), SCHEMA_VERSION_1).unwrap(), v1);
     assert_eq!(to_current(&v1).unwrap().column_by_name("target_known_share").unwrap().len(), 6);
     // A batch labelled version 2 with version-1 columns is refused, naming the column.
     let mislabelled = arrow::array::RecordBatch::try_new(
@@ -142,9 +144,27 @@ fn version_1_batches_convert_both_ways_bit_for_bit() {
     )
     .unwrap();
     let e = to_current(&mislabelled).unwrap_err().to_string();
-    assert!(e.contains("pairs/2") && e.contains("unit_index"), "{e}");
+    assert!(e.contains(pointreggpt::shards::SCHEMA_VERSION) && e.contains("unit_index"), "{e}");
 }
 
 fn without_provenance_keep_timings(rows: &[PairRow]) -> Vec<PairRow> {
-    rows.iter().map(|r| PairRow { target_known_share: Vec::new(), target_view: Vec::new(), ..r.clone() }).collect()
+    rows.iter().map(|r| PairRow { target_known_share: Vec::new(), target_scene_share: Vec::new(), target_view: Vec::new(), ..r.clone() }).collect()
+}
+
+#[test]
+fn version_2_batches_convert_both_ways_and_read_without_a_scene() {
+    use pointreggpt::shards::pairs_versions::{downgrade, to_current};
+    use pointreggpt::shards::{batch_to_pairs, pairs_to_batch, SCHEMA_VERSION_2};
+    // Rows a version-2 build could make: no scene (shares 0, no frames fused).
+    let rows: Vec<PairRow> = (0..6)
+        .map(row)
+        .map(|r| PairRow { target_scene_share: vec![0.0; r.target_known_share.len()], scene_frames: 0, ..r })
+        .collect();
+    let current = pairs_to_batch(&rows).unwrap();
+    let v2 = downgrade(&current, SCHEMA_VERSION_2).unwrap();
+    assert_eq!(v2.num_columns(), 30);
+    assert!(v2.column_by_name("target_scene_share").is_none() && v2.column_by_name("scene_frames").is_none());
+    // Back up: the scene shares are zeros aligned with the known shares, bit for bit the rows written.
+    assert_eq!(to_current(&v2).unwrap(), current);
+    assert_eq!(batch_to_pairs(&v2).unwrap(), rows);
 }

@@ -4,8 +4,8 @@
 use arrow::datatypes::SchemaRef;
 use pointreggpt::shards::labels::LABELS_SCHEMA_VERSION;
 use pointreggpt::shards::schema::type_notation;
-use pointreggpt::shards::schema::pairs_schema_v1;
-use pointreggpt::shards::{labels_schema, pairs_schema, SCHEMA_VERSION, SCHEMA_VERSION_1};
+use pointreggpt::shards::schema::{pairs_schema_v1, pairs_schema_v2};
+use pointreggpt::shards::{labels_schema, pairs_schema, SCHEMA_VERSION, SCHEMA_VERSION_1, SCHEMA_VERSION_2};
 
 /// Rows `(column, type, nullable)` of the first markdown table of a `schemas/*.md` file.
 fn markdown_columns(text: &str) -> Vec<(String, String, String)> {
@@ -56,7 +56,8 @@ fn check_markdown(file: &str, version: &str, schema: &SchemaRef) {
 
 #[test]
 fn markdown_schemas_match_the_code() {
-    check_markdown("pairs-v2.md", SCHEMA_VERSION, &pairs_schema());
+    check_markdown("pairs-v3.md", SCHEMA_VERSION, &pairs_schema());
+    check_markdown("pairs-v2.md", SCHEMA_VERSION_2, &pairs_schema_v2());
     check_markdown("pairs-v1.md", SCHEMA_VERSION_1, &pairs_schema_v1());
     check_markdown("labels-v1.md", LABELS_SCHEMA_VERSION, &labels_schema());
 }

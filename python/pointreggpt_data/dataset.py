@@ -4,12 +4,14 @@ Only the shard files named by ``<dataset>/manifest/pairs-<shard>.json`` entries 
 under ``shards/``) are part of a dataset; other files in ``shards/`` (a shard being written, a writer
 that lost a race on an object store) are never read.
 
-Schema versions (``schemas/pairs-v2.md``, ``schemas/pairs-v1.md`` in the pointreggpt repository):
-``pairs/2`` stores every integer signed, the 64-bit ``seed`` bit for bit as ``int64`` (negative at or
-above 2**63), and adds the per-point provenance lists ``target_known_share`` (float32) and
-``target_view`` (int8), aligned with ``target_points``. ``pairs/1`` stores unsigned integers and has no
-provenance. This module gives the same Python values for both: ``unit_index`` and the unsigned ``seed``
-as Python ints, and ``None`` provenance for version 1.
+Schema versions (``schemas/pairs-v3.md``, ``pairs-v2.md``, ``pairs-v1.md`` in the pointreggpt repository):
+``pairs/3`` adds the scene to ``pairs/2``: ``scene_frames`` (int32) and the per-point
+``target_scene_share`` (float32), the share of a target point's voxel that the posed frames around the
+source saw. ``pairs/2`` stores every integer signed, the 64-bit ``seed`` bit for bit as ``int64`` (negative
+at or above 2**63), and the per-point provenance lists ``target_known_share`` (float32) and ``target_view``
+(int8), aligned with ``target_points``. ``pairs/1`` stores unsigned integers and has no provenance. This
+module gives the same Python values for all: ``unit_index`` and the unsigned ``seed`` as Python ints,
+``None`` provenance for version 1, and scene shares of 0 for version 2 (exact: it had no scene).
 """
 
 import json
@@ -43,6 +45,10 @@ PAIR_COLUMNS = [
     "source_points", "target_points", "overlap_source", "overlap_target",
 ]
 PROVENANCE_COLUMNS = ["target_known_share", "target_view"]
+#: Columns version 3 added (read where a shard has them).
+SCENE_COLUMNS = ["target_scene_share", "scene_frames"]
+#: The schema versions this reader knows.
+SCHEMA_VERSIONS = ("pairs/1", "pairs/2", "pairs/3")
 STATUSES = ("ok", "low_overlap", "too_few_points", "input_error")
 
 
@@ -162,7 +168,7 @@ class Dataset:
     """A pointreggpt dataset opened for reading (see ``open_dataset``).
 
     Attributes: ``url``, ``filesystem`` and ``base`` (the dataset's path in it), ``schema_version``
-    (``"pairs/2"`` or ``"pairs/1"``, from ``dataset.toml``), ``has_provenance``, ``config_hash``,
+    (``"pairs/3"``, ``"pairs/2"`` or ``"pairs/1"``, from ``dataset.toml``), ``has_provenance``, ``config_hash``,
     ``shards`` (the committed shards in shard order), ``num_rows`` (rows of the committed shards).
     """
 
@@ -174,9 +180,9 @@ class Dataset:
         self.schema_version = header.get("schema_version", "")
         self.config_hash = header.get("config_hash", "")
         self.code_version = header.get("code_version", "")
-        if self.schema_version not in ("pairs/1", "pairs/2"):
+        if self.schema_version not in SCHEMA_VERSIONS:
             raise DatasetError(
-                f"{self.url}: the dataset's schema is {self.schema_version!r}; this reader knows pairs/1 and pairs/2"
+                f"{self.url}: the dataset's schema is {self.schema_version!r}; this reader knows {', '.join(SCHEMA_VERSIONS)}"
             )
         self.has_provenance = self.schema_version != "pairs/1"
         self.shards = self._read_manifest()
@@ -297,10 +303,10 @@ class Dataset:
     def read_shard(self, shard, columns, filter=None):
         """The columns ``columns`` of one committed shard (only those, and the columns ``filter`` uses, are
         read), rows in file order, keeping those where ``filter`` (a ``pyarrow.compute`` expression) holds.
-        Missing provenance columns of a version-1 shard are left out."""
+        Columns an older shard lacks (provenance in version 1, the scene before version 3) are left out."""
         names = self.shard_schema(shard).names
         cols = [c for c in columns if c in names]
-        unknown = [c for c in columns if c not in names and c not in PROVENANCE_COLUMNS]
+        unknown = [c for c in columns if c not in names and c not in PROVENANCE_COLUMNS + SCENE_COLUMNS]
         if unknown:
             raise KeyError(f"{shard.path}: no column(s) {unknown} (columns: {', '.join(names)})")
         return self.fragment(shard).to_table(columns=cols, filter=filter)
@@ -331,7 +337,8 @@ class Dataset:
         """Yields each selected pair as a dict (``PAIR_FIELDS``), shard by shard in unit order, reading
         the pair columns (plus ``columns``, returned as Python values) of one shard at a time."""
         expr = selection_expression(status, scene, overlap_source, overlap_target, where)
-        wanted = PAIR_COLUMNS + PROVENANCE_COLUMNS + [c for c in columns if c not in PAIR_COLUMNS + PROVENANCE_COLUMNS]
+        base = PAIR_COLUMNS + PROVENANCE_COLUMNS + ["target_scene_share"]
+        wanted = base + [c for c in columns if c not in base]
         for shard in self.shards:
             decoded = DecodedShard(self.read_shard(shard, wanted, expr), extra=columns)
             for i in decoded.order:
@@ -343,11 +350,13 @@ class Dataset:
 #: ``pair_key`` str, ``scene`` str, ``status`` str, ``unit_index`` int, ``seed`` int (the unit's unsigned
 #: 64-bit seed), ``source_points`` float32 (N, 3) in the source camera frame, ``target_points`` float32
 #: (M, 3) in the target camera frame, ``T_target_from_source`` float64 (4, 4) (``p_t = R p_s + t``),
-#: ``overlap_source`` / ``overlap_target`` float, ``target_known_share`` float32 (M,) and ``target_view``
-#: int8 (M,) (``None`` in a version-1 dataset).
+#: ``overlap_source`` / ``overlap_target`` float, ``target_known_share`` float32 (M,), ``target_scene_share``
+#: float32 (M,) and ``target_view`` int8 (M,) (``None`` in a version-1 dataset; the scene shares 0 in a
+#: version-2 one). A point's made-up share is ``1 - known - scene``.
 PAIR_FIELDS = (
     "pair_key", "scene", "status", "unit_index", "seed", "source_points", "target_points",
-    "T_target_from_source", "overlap_source", "overlap_target", "target_known_share", "target_view",
+    "T_target_from_source", "overlap_source", "overlap_target", "target_known_share", "target_scene_share",
+    "target_view",
 )
 
 
@@ -373,9 +382,13 @@ class DecodedShard:
         if self.provenance and self.n:
             self.known, self.known_off = _flat_values(col("target_known_share"), np.float32)
             self.view, self.view_off = _flat_values(col("target_view"), np.int8)
-            if not (np.array_equal(self.known_off, self.target_off) and np.array_equal(self.view_off, self.target_off)):
-                bad = [self.pair_key[i] for i in range(self.n) if not (
-                    self.known_off[i + 1] - self.known_off[i] == self.view_off[i + 1] - self.view_off[i] == self.target_off[i + 1] - self.target_off[i])]
+            if "target_scene_share" in table.column_names:
+                self.scene_share, self.scene_off = _flat_values(col("target_scene_share"), np.float32)
+            else:  # version 2: no scene
+                self.scene_share, self.scene_off = np.zeros(len(self.known), dtype=np.float32), self.known_off
+            offsets = (self.known_off, self.scene_off, self.view_off)
+            if not all(np.array_equal(o, self.target_off) for o in offsets):
+                bad = [self.pair_key[i] for i in range(self.n) if len({int(o[i + 1] - o[i]) for o in offsets + (self.target_off,)}) != 1]
                 raise DatasetError(f"provenance lists not aligned with target_points in pair(s) {bad[:5]}")
         self.extra = {c: table.column(c).to_pylist() for c in extra}
         self.order = sorted(range(self.n), key=lambda i: self.unit_index[i])
@@ -396,10 +409,12 @@ class DecodedShard:
             "overlap_source": float(self.overlap_source[i]),
             "overlap_target": float(self.overlap_target[i]),
             "target_known_share": None,
+            "target_scene_share": None,
             "target_view": None,
         }
         if self.provenance:
             out["target_known_share"] = self.known[self.known_off[i]:self.known_off[i + 1]].copy()
+            out["target_scene_share"] = self.scene_share[self.scene_off[i]:self.scene_off[i + 1]].copy()
             out["target_view"] = self.view[self.view_off[i]:self.view_off[i + 1]].copy()
         for c, values in self.extra.items():
             out[c] = values[i]

@@ -24,7 +24,7 @@ except ImportError:  # pragma: no cover - exercised only without torch
 
 #: Per-point fields that ``collate`` concatenates, with the cloud whose lengths they follow.
 _POINT_FIELDS = (("source_points", "source"), ("target_points", "target"),
-                 ("target_known_share", "target"), ("target_view", "target"))
+                 ("target_known_share", "target"), ("target_scene_share", "target"), ("target_view", "target"))
 
 
 class PairDataset(_Base):
@@ -103,7 +103,7 @@ class PairDataset(_Base):
 
 def _wanted(columns):
     """The columns a pair is read from, then the extra ``columns``."""
-    base = PAIR_COLUMNS + PROVENANCE_COLUMNS
+    base = PAIR_COLUMNS + PROVENANCE_COLUMNS + ["target_scene_share"]
     return base + [c for c in columns if c not in base]
 
 
@@ -239,8 +239,8 @@ def collate(samples):
     - ``source_lengths``, ``target_lengths`` (B,) int64: N_b and M_b (pair b's points are rows
       ``lengths[:b].sum()`` to ``lengths[:b + 1].sum()``);
     - ``source_batch`` (sum N_b,), ``target_batch`` (sum M_b,) int64: the pair index of every point;
-    - ``target_known_share`` (sum M_b,) float32 and ``target_view`` (sum M_b,) int8, aligned with
-      ``target_points``; ``None`` when a sample has no provenance (version-1 datasets);
+    - ``target_known_share``, ``target_scene_share`` (sum M_b,) float32 and ``target_view`` (sum M_b,)
+      int8, aligned with ``target_points``; ``None`` when a sample has no provenance (version-1 datasets);
     - ``T_target_from_source`` (B, 4, 4) float64, ``overlap_source``/``overlap_target`` (B,) float64,
       ``unit_index`` (B,) int64;
     - ``pair_key``, ``scene``, ``status``: lists of B strings; ``seed``: a list of B Python ints (unsigned

@@ -30,6 +30,11 @@ pub struct BuildArgs {
     /// anew. The pairs are the same either way.
     #[arg(long, value_name = "FRAMES", default_value_t = BuildOptions::FRAME_CACHE)]
     pub frame_cache: usize,
+    /// With a `scene` method: scenes kept fused for the next units of their block of source frames
+    /// (each holds a TSDF volume, a few tens of MB at 1 cm voxels); 0 fuses a scene for every unit. The
+    /// pairs are the same either way.
+    #[arg(long, value_name = "SCENES", default_value_t = BuildOptions::SCENE_CACHE)]
+    pub scene_cache: usize,
 }
 
 /// The flags `build` and `labels` share: where the dataset goes, overrides, the worker split.
@@ -67,7 +72,7 @@ impl RunArgs {
     pub fn options(&self, config: &Path) -> Result<BuildOptions> {
         let (worker, workers) = worker_from_env(self.worker, self.workers)?;
         let out = self.out.clone().unwrap_or_else(|| PathBuf::from("out").join(config.file_stem().unwrap_or_default()));
-        Ok(BuildOptions { out, worker, workers, strict: self.strict, progress: !self.no_progress, frame_cache: BuildOptions::FRAME_CACHE })
+        Ok(BuildOptions { out, worker, workers, strict: self.strict, progress: !self.no_progress, frame_cache: BuildOptions::FRAME_CACHE, scene_cache: BuildOptions::SCENE_CACHE })
     }
 }
 
@@ -107,7 +112,7 @@ pub fn run(args: &BuildArgs, out: &mut dyn Write) -> Result<()> {
         write!(out, "{}", config.to_toml()).map_err(w)?;
         return Ok(());
     }
-    let opts = BuildOptions { frame_cache: args.frame_cache, ..args.run.options(&args.config)? };
+    let opts = BuildOptions { frame_cache: args.frame_cache, scene_cache: args.scene_cache, ..args.run.options(&args.config)? };
     let (dataset, worker, workers) = (opts.out.clone(), opts.worker, opts.workers);
     let cancel = CancelToken::new();
     cancel.cancel_on_signals();
@@ -127,7 +132,8 @@ pub fn run(args: &BuildArgs, out: &mut dyn Write) -> Result<()> {
     .map_err(w)?;
     let by: Vec<String> = r.rows_by_status.iter().map(|(k, v)| format!("{k} {v}")).collect();
     writeln!(out, "rows written: {rows} ({})", if by.is_empty() { "none".into() } else { by.join(", ") }).map_err(w)?;
-    writeln!(out, "time {:.1} s, {:.1} pairs/s; frames decoded {} times", r.summary.wall.as_secs_f64(), r.summary.rate(), r.frames_prepared)
+    let scenes = if config.uses_scene() { format!("; scenes fused {}", r.scenes_fused) } else { String::new() };
+    writeln!(out, "time {:.1} s, {:.1} pairs/s; frames decoded {} times{scenes}", r.summary.wall.as_secs_f64(), r.summary.rate(), r.frames_prepared)
         .map_err(w)?;
     write!(out, "{}", r.summary.stage_table()).map_err(w)?;
     writeln!(out, "committed shards: listed in {}/manifest/", dataset.display()).map_err(w)?;
@@ -150,7 +156,7 @@ pub fn run(args: &BuildArgs, out: &mut dyn Write) -> Result<()> {
 fn publish_table(dataset: &Path, out: &mut dyn Write) -> Result<()> {
     let w = |e: std::io::Error| Error::io("<stdout>", e);
     let ds = Dataset::open(dataset)?;
-    if ds.header().schema_version != crate::shards::SCHEMA_VERSION {
+    if ds.header().schema_version == crate::shards::SCHEMA_VERSION_1 {
         writeln!(out, "delta: not published: a {} dataset has unsigned integers, which Delta cannot type", ds.header().schema_version).map_err(w)?;
         return Ok(());
     }

@@ -105,9 +105,21 @@ pub struct EvalInpaintArgs {
     pub pipeline: Vec<PathBuf>,
     /// Also write every view (after each correction) to this folder: NNN_condition.npy, NNN_known.npy,
     /// NNN_captured.npy (float32 metres / bool, H x W), views.json (intrinsics, pose, depth range) and each
-    /// fill's output, NNN_fill_<fill>.npy (benchmarks/peers/fill_peers.py scores them with the peers).
+    /// fill's output, NNN_fill_<fill>.npy (benchmarks/peers/fill_peers.py scores them with the peers);
+    /// with --scene also NNN_scene.npy (the scene's depth at the unknown pixels it sees).
     #[arg(long)]
     pub dump_views: Option<PathBuf>,
+    /// Add the scene rows: the frames around each source frame (the [scene] window of the first --pipeline
+    /// config, else the default: blocks of 30, reach 60, every 3rd frame, 1 cm TSDF) fused and ray-cast at
+    /// the target pose, WITHOUT the target frame and --scene-exclude frames on each side of it. Rows: the
+    /// `scene` correction (min-pool where the scene saw nothing), and the fills `scene` (scene only),
+    /// `scene+background`, `scene+push_pull`, `scene+nearest` (the fallback fills what the scene did not see).
+    #[arg(long)]
+    pub scene: bool,
+    /// With --scene: frames on each side of the captured target frame held out of its scene (the target
+    /// frame itself always is).
+    #[arg(long, default_value_t = 15)]
+    pub scene_exclude: usize,
 }
 
 #[derive(Debug, clap::Args)]
@@ -190,7 +202,7 @@ fn run_correction(a: &EvalCorrectionArgs, out: &mut dyn Write) -> Result<()> {
 
 fn run_inpaint(a: &EvalInpaintArgs, out: &mut dyn Write) -> Result<()> {
     use crate::correction::CorrectionConfig;
-    use crate::training::eval_inpaint::{dump_views, evaluate, format_table, make_view, to_csv, NamedCorrector, NamedFill};
+    use crate::training::eval_inpaint::{dump_views, evaluate, format_table, make_view, scene_of_view, to_csv, NamedCorrector, NamedFill};
     use crate::diffusion::sampler::Resample;
     use crate::inpainting::{DiffusionInpaintConfig, InpaintConfig, Start};
     use crate::nn::ModelPath;
@@ -217,7 +229,10 @@ fn run_inpaint(a: &EvalInpaintArgs, out: &mut dyn Write) -> Result<()> {
         })
         .collect::<Result<Vec<_>>>()?;
     let working = pipelines.first().map(|(_, c)| c.working.clone()).unwrap_or_default();
+    let scene_config = pipelines.first().map(|(_, c)| c.scene.clone()).unwrap_or_default();
+    let with_scene = a.scene || pipelines.iter().any(|(_, c)| c.uses_scene());
     let mut views = Vec::new();
+    let mut scene_frames = 0usize;
     let mut unposed = 0;
     for seq in crate::sources::open_sequences(&a.sequences, a.open.options()?)? {
         let mut taken = 0;
@@ -231,7 +246,13 @@ fn run_inpaint(a: &EvalInpaintArgs, out: &mut dyn Write) -> Result<()> {
             }
             let (s, t) = (seq.frames[j].load()?, seq.frames[j + a.gap].load()?);
             let seed = crate::rng::unit_seed(a.seed, &s.key, a.gap as u64);
-            views.push(make_view(&s, &t, &working, seed)?);
+            let mut view = make_view(&s, &t, &working, seed)?;
+            if with_scene {
+                let (depth, fused) = scene_of_view(&seq, j, j + a.gap, a.scene_exclude, &scene_config, &view.intrinsics)?;
+                scene_frames += fused.len();
+                view.scene = Some(depth);
+            }
+            views.push(view);
             taken += 1;
         }
     }
@@ -241,23 +262,33 @@ fn run_inpaint(a: &EvalInpaintArgs, out: &mut dyn Write) -> Result<()> {
     if views.is_empty() {
         return Err(Error::config("sequences", format!("no posed frame pair {} frames apart after --first {}", a.gap, a.first)));
     }
+    if with_scene {
+        let exclude = a.scene_exclude;
+        writeln!(out, "scenes: {:.1} frames fused per view on average; each view's target frame and {exclude} frames on each side held out", scene_frames as f64 / views.len() as f64)
+            .map_err(w)?;
+    }
     if !pipelines.is_empty() {
         return run_pipelines(a, &pipelines, &views, &working, out);
     }
-    let mut corrections = vec![
-        NamedCorrector { name: "none".into(), corrector: CorrectionConfig::None {}.build() },
-        NamedCorrector { name: "min_pool".into(), corrector: CorrectionConfig::OFFICIAL_MIN_POOL.build() },
-    ];
+    let mut corrections = vec![NamedCorrector::new("none", &CorrectionConfig::None {}), NamedCorrector::new("min_pool", &CorrectionConfig::OFFICIAL_MIN_POOL)];
     let unet = CorrectionConfig::Unet { checkpoint: ModelPath::new(&a.correction.display().to_string()), threshold: 0.99, preset: None };
     unet.validate("--correction")?;
-    corrections.push(NamedCorrector { name: "unet@0.99".into(), corrector: unet.build() });
+    corrections.push(NamedCorrector::new("unet@0.99", &unet));
     let mut fills = vec![
-        NamedFill { name: "none".into(), inpainter: InpaintConfig::None {}.build()? },
-        NamedFill { name: "push_pull".into(), inpainter: InpaintConfig::PushPull {}.build()? },
-        NamedFill { name: "nearest".into(), inpainter: InpaintConfig::Nearest {}.build()? },
-        NamedFill { name: "background".into(), inpainter: InpaintConfig::Background {}.build()? },
-        NamedFill { name: "ip_basic".into(), inpainter: InpaintConfig::IpBasic {}.build()? },
+        NamedFill::new("none", &InpaintConfig::None {})?,
+        NamedFill::new("push_pull", &InpaintConfig::PushPull {})?,
+        NamedFill::new("nearest", &InpaintConfig::Nearest {})?,
+        NamedFill::new("background", &InpaintConfig::Background {})?,
+        NamedFill::new("ip_basic", &InpaintConfig::IpBasic {})?,
     ];
+    if a.scene {
+        corrections.push(NamedCorrector::new("scene", &CorrectionConfig::scene(CorrectionConfig::OFFICIAL_MIN_POOL)));
+        let scene = |fallback: InpaintConfig| InpaintConfig::Scene { fallback: Box::new(fallback) };
+        fills.push(NamedFill::new("scene", &scene(InpaintConfig::None {}))?);
+        fills.push(NamedFill::new("scene+background", &scene(InpaintConfig::Background {}))?);
+        fills.push(NamedFill::new("scene+push_pull", &scene(InpaintConfig::PushPull {}))?);
+        fills.push(NamedFill::new("scene+nearest", &scene(InpaintConfig::Nearest {}))?);
+    }
     // A network trained only on the nearly clean steps (`train diffusion --max-t`) has no pure-noise row.
     let low_steps_only = crate::diffusion::checkpoint::read_meta(&a.diffusion).ok().and_then(|m| m.trained_below_step()).is_some();
     let started = [
@@ -279,7 +310,7 @@ fn run_inpaint(a: &EvalInpaintArgs, out: &mut dyn Write) -> Result<()> {
             resample: (a.resample_jump > 0).then_some(Resample { jump: a.resample_jump, repeats: a.resample_repeats }),
         });
         diffusion.validate("--diffusion")?;
-        fills.push(NamedFill { name, inpainter: diffusion.build()? });
+        fills.push(NamedFill::new(name, &diffusion)?);
     }
     let range = (working.depth_range[0], working.depth_range[1]);
     if let Some(dir) = &a.dump_views {
@@ -307,12 +338,12 @@ fn run_pipelines(
     let bar = crate::runtime::progress::bar((views.len() * pipelines.len()) as u64, !a.quiet, "views");
     let mut rows: Vec<MethodRow> = Vec::new();
     for (name, config) in pipelines {
-        let condition = config.correct.condition;
-        let corrections = [NamedCorrector { name: correction_name(&condition), corrector: condition.build() }];
+        let condition = &config.correct.condition;
+        let corrections = [NamedCorrector::new(correction_name(condition), condition)];
         if let Some(dir) = &a.dump_views {
             dump_views(&dir.join(name), views, &corrections, range)?;
         }
-        let fills = [NamedFill { name: name.clone(), inpainter: config.inpaint.build()? }];
+        let fills = [NamedFill::new(name.clone(), &config.inpaint)?];
         let dump = a.dump_views.as_ref().map(|dir| dir.join(name));
         rows.extend(evaluate(views, &corrections, &fills, range, dump.as_deref(), || bar.inc(1))?);
     }
@@ -328,6 +359,7 @@ fn correction_name(c: &crate::correction::CorrectionConfig) -> String {
         C::MinPool { .. } => "min_pool".into(),
         C::Median { .. } => "median".into(),
         C::Unet { threshold, .. } => format!("unet@{threshold}"),
+        C::Scene { fallback, .. } => format!("scene/{}", correction_name(fallback)),
     }
 }
 

@@ -81,13 +81,14 @@ pub struct DescriptorTrainingArgs {
     /// the number of pairs, so a larger mix does not show each real pair less often). Overrides --steps.
     #[arg(long)]
     pub epochs: Option<f64>,
-    /// Positives only on target points of generated pairs that were re-projected from the source
-    /// (target_known_share >= 0.5), never on filled ones. Real pairs are unaffected; beside --drop-filled it
-    /// changes nothing (no filled point is left to draw).
+    /// Positives only on target points of generated pairs that a sensor saw, re-projected from the source
+    /// or seen by the scene (target_known_share + target_scene_share >= 0.5), never on made-up ones. Real
+    /// pairs are unaffected; beside --drop-filled it changes nothing (no made-up point is left to draw).
     #[arg(long)]
     pub known_positives: bool,
-    /// Drop the filled target points of generated pairs (target_known_share < 0.5) before training, so
-    /// they enter no local frame, patch or feature.
+    /// Drop the made-up target points of generated pairs (target_known_share + target_scene_share < 0.5:
+    /// filled by a fill, not re-projected nor seen by the scene) before training, so they enter no local
+    /// frame, patch or feature.
     #[arg(long)]
     pub drop_filled: bool,
     /// Gaussian noise added to both clouds' points each time a pair is drawn, sigma in metres (0: none;

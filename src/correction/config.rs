@@ -5,7 +5,7 @@ use super::{Corrector, MedianFilter, MinPoolFilter, NoCorrection, UnetCorrector}
 use serde::{Deserialize, Serialize};
 
 /// The correction methods a pipeline config can name.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "method", rename_all = "snake_case", deny_unknown_fields)]
 pub enum CorrectionConfig {
     /// Keep every pixel. (An empty struct variant, so that serde refuses settings beside it.)
@@ -27,42 +27,66 @@ pub enum CorrectionConfig {
         #[serde(default, skip_serializing_if = "Option::is_none")]
         preset: Option<crate::nn::Preset>,
     },
+    /// For posed sequences: the scene fused from the frames around the source frame (`[scene]`), ray-cast
+    /// at the target pose, decides by the correction labels' rule (drop a pixel `margin` metres or more off
+    /// the fused surface: τ_gt, official 0.05); where the scene saw no surface, and for frames without a
+    /// pose, `fallback` decides (any other method).
+    Scene { margin: f32, fallback: Box<CorrectionConfig> },
 }
 
 impl CorrectionConfig {
     /// The official hand-crafted filter: min-pool at 3.75 cm (reference §3.3).
     pub const OFFICIAL_MIN_POOL: CorrectionConfig = CorrectionConfig::MinPool { threshold: 0.0375 };
 
-    /// The model file this method reads, if any.
-    pub fn checkpoint(&self) -> Option<crate::nn::ModelPath> {
+    /// The scene method with the official label margin (τ_gt 0.05 m) over `fallback`.
+    pub fn scene(fallback: CorrectionConfig) -> CorrectionConfig {
+        CorrectionConfig::Scene { margin: 0.05, fallback: Box::new(fallback) }
+    }
+
+    /// The scene's margin when the method is `scene`.
+    pub fn scene_margin(&self) -> Option<f32> {
         match self {
-            CorrectionConfig::Unet { checkpoint, .. } => Some(*checkpoint),
+            CorrectionConfig::Scene { margin, .. } => Some(*margin),
             _ => None,
         }
     }
 
-    /// Calls `visit` on the checkpoint path, if any, as `<field>.checkpoint`.
+    /// The model file this method reads, if any (the fallback's, for `scene`).
+    pub fn checkpoint(&self) -> Option<crate::nn::ModelPath> {
+        match self {
+            CorrectionConfig::Unet { checkpoint, .. } => Some(*checkpoint),
+            CorrectionConfig::Scene { fallback, .. } => fallback.checkpoint(),
+            _ => None,
+        }
+    }
+
+    /// Calls `visit` on the checkpoint path, if any, as `<field>.checkpoint` (`<field>.fallback.checkpoint`).
     pub fn for_each_path(&mut self, field: &str, visit: &mut dyn FnMut(&str, &mut std::path::PathBuf)) {
-        if let CorrectionConfig::Unet { checkpoint, .. } = self {
-            crate::config_paths::visit_model(visit, &format!("{field}.checkpoint"), checkpoint);
+        match self {
+            CorrectionConfig::Unet { checkpoint, .. } => crate::config_paths::visit_model(visit, &format!("{field}.checkpoint"), checkpoint),
+            CorrectionConfig::Scene { fallback, .. } => fallback.for_each_path(&format!("{field}.fallback"), visit),
+            _ => {}
         }
     }
 
     /// Checks parameter ranges; `field` names the config key in errors.
     pub fn validate(&self, field: &str) -> crate::Result<()> {
         let bad = |m: &str| Err(crate::Error::config(field, m));
-        match *self {
+        match self {
+            CorrectionConfig::Scene { fallback, .. } if fallback.scene_margin().is_some() => bad("the fallback of `scene` must be another method"),
+            CorrectionConfig::Scene { margin, .. } if !(*margin > 0.0 && margin.is_finite()) => bad("margin must be a positive number of metres"),
+            CorrectionConfig::Scene { fallback, .. } => fallback.validate(&format!("{field}.fallback")),
             CorrectionConfig::None {} => Ok(()),
-            CorrectionConfig::MinPool { threshold } | CorrectionConfig::Median { threshold, .. } if !(threshold > 0.0 && threshold.is_finite()) => {
+            CorrectionConfig::MinPool { threshold } | CorrectionConfig::Median { threshold, .. } if !(*threshold > 0.0 && threshold.is_finite()) => {
                 bad("threshold must be a positive number of metres")
             }
-            CorrectionConfig::Median { window, .. } if window < 3 || window % 2 == 0 || window > 15 => bad("window must be odd, 3..=15"),
-            CorrectionConfig::Unet { threshold, .. } if !(threshold > 0.0 && threshold < 1.0) => bad("threshold must be a keep probability in (0, 1)"),
+            CorrectionConfig::Median { window, .. } if *window < 3 || window % 2 == 0 || *window > 15 => bad("window must be odd, 3..=15"),
+            CorrectionConfig::Unet { threshold, .. } if !(*threshold > 0.0 && *threshold < 1.0) => bad("threshold must be a keep probability in (0, 1)"),
             CorrectionConfig::Unet { checkpoint, preset, .. } => {
                 let (_, net, _) = crate::nn::load_correction(checkpoint.as_path(), tch::Device::Cpu)
                     .map_err(|e| crate::Error::config(field, format!("checkpoint `{checkpoint}`: {e}")))?;
                 match preset {
-                    Some(p) if net.config.preset != Some(p) => bad(&format!("checkpoint `{checkpoint}` is not the `{}` preset", p.as_str())),
+                    Some(p) if net.config.preset != Some(*p) => bad(&format!("checkpoint `{checkpoint}` is not the `{}` preset", p.as_str())),
                     _ => Ok(()),
                 }
             }
@@ -70,9 +94,11 @@ impl CorrectionConfig {
         }
     }
 
-    /// The corrector this config describes.
+    /// The corrector this config describes; for `scene`, its fallback's (the scene's own rule needs the
+    /// scene, which [`crate::stages::correct`] applies on top: [`crate::scene::scene_keep_mask`]).
     pub fn build(&self) -> Box<dyn Corrector> {
         match *self {
+            CorrectionConfig::Scene { ref fallback, .. } => fallback.build(),
             CorrectionConfig::None {} => Box::new(NoCorrection),
             CorrectionConfig::MinPool { threshold } => Box::new(MinPoolFilter { threshold }),
             CorrectionConfig::Median { window, threshold } => Box::new(MedianFilter { window, threshold }),

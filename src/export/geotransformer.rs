@@ -4,9 +4,10 @@
 //! <out>/metadata/train.pkl                      list of dicts, pickle protocol 2 (see below)
 //! <out>/data/train/<scene>/cloud_bin_<i>.pth    float32 (N, 3) numpy array saved as torch.save saves it
 //!                                               (pth.rs), each cloud in its own camera frame
-//! <out>/data/train/<scene>/cloud_bin_<i>.known_share.pth, .view.pth
-//!                                               the target cloud's per-point provenance: float32 (N,)
-//!                                               and int8 (N,) numpy arrays, the `target_known_share` /
+//! <out>/data/train/<scene>/cloud_bin_<i>.known_share.pth, .scene_share.pth, .view.pth
+//!                                               the target cloud's per-point provenance: float32 (N,),
+//!                                               float32 (N,) and int8 (N,) numpy arrays, the
+//!                                               `target_known_share` / `target_scene_share` /
 //!                                               `target_view` columns (not written for version-1 datasets)
 //! <out>/metadata/pairs.tsv                      export index → pair key, unit index, pcd0, pcd1
 //! ```
@@ -24,7 +25,8 @@
 //! `ref = src @ rotation.T + translation` (GeoTransformer's convention) where the clouds overlap.
 //! `overlap` is `overlap_target`, the fraction of `pcd0`'s points with a neighbour (as the authors'
 //! mixture loader uses the overlap of its `pcd0`). When the dataset has provenance, the dict also has
-//! `pcd0_known_share` and `pcd0_view`, the paths of those two files (GeoTransformer ignores extra keys).
+//! `pcd0_known_share`, `pcd0_scene_share` and `pcd0_view`, the paths of those files (GeoTransformer
+//! ignores extra keys).
 
 use super::npy::{encode_npy_points, encode_npy_vector_f32, encode_npy_vector_i8, write_npy};
 use super::pickle::{dumps, Value};
@@ -123,15 +125,18 @@ impl PairWriter for GeoTransformerWriter {
             }
         }
         let mut e = entry(index, row, &pcd0, &pcd1);
-        if row.target_known_share.len() == row.target_points.len() && row.target_view.len() == row.target_points.len() {
+        let n = row.target_points.len();
+        if row.target_known_share.len() == n && row.target_scene_share.len() == n && row.target_view.len() == n {
             let stem = pcd0.trim_end_matches(ext);
-            let (known, view) = (format!("{stem}.known_share{ext}"), format!("{stem}.view{ext}"));
-            let shares = &row.target_known_share;
+            let (known, scene, view) = (format!("{stem}.known_share{ext}"), format!("{stem}.scene_share{ext}"), format!("{stem}.view{ext}"));
+            for (file, shares) in [(&known, &row.target_known_share), (&scene, &row.target_scene_share)] {
+                self.write_array(file, Value::ArrayF32 { shape: vec![n], data: shares.clone() }, || encode_npy_vector_f32(shares))?;
+            }
             let views: Vec<i8> = row.target_view.iter().map(|&v| v as i8).collect();
-            self.write_array(&known, Value::ArrayF32 { shape: vec![shares.len()], data: shares.clone() }, || encode_npy_vector_f32(shares))?;
             self.write_array(&view, Value::ArrayI8 { shape: vec![views.len()], data: views.clone() }, || encode_npy_vector_i8(&views))?;
             if let Value::Dict(items) = &mut e {
                 items.push(("pcd0_known_share".into(), Value::Str(known)));
+                items.push(("pcd0_scene_share".into(), Value::Str(scene)));
                 items.push(("pcd0_view".into(), Value::Str(view)));
             }
         }
@@ -178,6 +183,7 @@ mod tests {
         let pth = tempfile::tempdir().unwrap();
         let mut w = GeoTransformerWriter::new(pth.path(), CloudFormat::default());
         row.target_known_share = vec![1.0, 0.5];
+        row.target_scene_share = vec![0.0, 0.25];
         row.target_view = vec![0, 1];
         w.write(3, &row).unwrap();
         w.finish().unwrap();
@@ -187,6 +193,8 @@ mod tests {
         let view = Value::ArrayI8 { shape: vec![2], data: vec![0, 1] };
         assert_eq!(std::fs::read(d.join("cloud_bin_6.view.pth")).unwrap(), encode_pth("cloud_bin_6.view", &view));
         assert!(d.join("cloud_bin_6.known_share.pth").exists() && !d.join("cloud_bin_6.npy").exists());
+        let scene = Value::ArrayF32 { shape: vec![2], data: vec![0.0, 0.25] };
+        assert_eq!(std::fs::read(d.join("cloud_bin_6.scene_share.pth")).unwrap(), encode_pth("cloud_bin_6.scene_share", &scene));
         let text = String::from_utf8_lossy(&std::fs::read(pth.path().join("metadata/train.pkl")).unwrap()).into_owned();
         assert!(text.contains("train/s/cloud_bin_6.pth") && text.contains("train/s/cloud_bin_6.view.pth") && !text.contains(".npy"));
         match entry(3, &row, "a", "b") {

@@ -12,7 +12,7 @@ use super::rows::unique_name;
 use super::{matrix_text, write_text, PairWriter};
 use crate::error::Result;
 use crate::shards::row::PairRow;
-use crate::ply::{write_points, write_points_with_provenance};
+use crate::ply::{write_points, write_points_with_provenance, Provenance};
 use std::collections::HashSet;
 use std::path::{Path, PathBuf};
 
@@ -41,7 +41,7 @@ impl PairWriter for PlyWriter {
         let name = unique_name(&mut self.used, &row.pair_key, row.unit_index);
         let dir = self.out.join(&name);
         write_points(&dir.join("source.ply"), &row.source_points)?;
-        write_points_with_provenance(&dir.join("target.ply"), &row.target_points, &row.target_known_share, &row.target_view)?;
+        write_points_with_provenance(&dir.join("target.ply"), &row.target_points, Provenance::of(row))?;
         write_text(&dir.join("T_target_from_source.txt"), &matrix_text(&row.t_target_from_source, 4))?;
         self.tsv.push_str(&format!("{name}\t{}\t{}\t{}\n", row.pair_key, row.unit_index, row.status.as_str()));
         Ok(())

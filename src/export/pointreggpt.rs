@@ -18,7 +18,7 @@ use super::{is_ok, matrix_text, row_pose, write_text, PairWriter};
 use crate::error::Result;
 use crate::geometry::{pose_to_rows, transform_points};
 use crate::shards::row::PairRow;
-use crate::ply::{write_points, write_points_with_provenance};
+use crate::ply::{write_points, write_points_with_provenance, Provenance};
 use std::path::{Path, PathBuf};
 
 /// The official keep rule's minimum cloud size.
@@ -68,7 +68,7 @@ impl PairWriter for PointRegGptWriter {
         let t_source_from_target = row_pose(row)?.inverse();
         write_points(&dir.join("sample-000000.cloud.ply"), &row.source_points)?;
         let target = transform_points(&row.target_points, &t_source_from_target);
-        write_points_with_provenance(&dir.join("sample-000001.cloud.ply"), &target, &row.target_known_share, &row.target_view)?;
+        write_points_with_provenance(&dir.join("sample-000001.cloud.ply"), &target, Provenance::of(row))?;
         write_text(&dir.join("sample-000001.pose.txt"), &matrix_text(&pose_to_rows(&t_source_from_target), 4))?;
         let [fx, fy, cx, cy] = row.source_intrinsics;
         write_text(&dir.join("camera-intrinsics.txt"), &matrix_text(&[fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0], 3))?;

@@ -4,7 +4,7 @@
 use crate::error::{Error, Result};
 use crate::shards::dataset::{Dataset, PAIRS_TABLE};
 use crate::shards::pairs::batch_to_pairs;
-use crate::shards::pairs_v1::to_current;
+use crate::shards::pairs_versions::to_current;
 use crate::shards::row::PairRow;
 use super::Filter;
 use indicatif::ProgressBar;

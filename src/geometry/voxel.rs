@@ -105,7 +105,7 @@ fn accumulate(points: &[Point], tags: Option<&[PointTag]>, keys: &[u64], range: 
             continue;
         }
         let e = table.entry(k);
-        let Entry { mut sum, mut n, mut known, mut view, .. } = table.entries[e];
+        let Entry { mut sum, mut n, mut known, mut scene, mut view, .. } = table.entries[e];
         let run = i;
         while i < points.len() && keys[i] == k {
             let p = &points[i];
@@ -118,15 +118,16 @@ fn accumulate(points: &[Point], tags: Option<&[PointTag]>, keys: &[u64], range: 
         if let Some(tags) = tags {
             for t in &tags[run..i] {
                 known += t.known as f64;
+                scene += t.scene as f64;
                 view = view.min(t.view);
             }
         }
-        (table.entries[e].sum, table.entries[e].n, table.entries[e].known, table.entries[e].view) = (sum, n, known, view);
+        (table.entries[e].sum, table.entries[e].n, table.entries[e].known, table.entries[e].scene, table.entries[e].view) = (sum, n, known, scene, view);
     }
     let mut entries = table.entries;
     entries.sort_unstable_by_key(|e| e.key);
     let summary = match tags {
-        Some(_) => entries.iter().map(|e| PointTag { known: (e.known / e.n as f64) as f32, view: e.view }).collect(),
+        Some(_) => entries.iter().map(|e| PointTag { known: (e.known / e.n as f64) as f32, scene: (e.scene / e.n as f64) as f32, view: e.view }).collect(),
         None => Vec::new(),
     };
     (entries.iter().map(|e| centroid(e.sum, e.n)).collect(), summary)
@@ -138,8 +139,9 @@ struct Entry {
     key: u64,
     sum: [f64; 3],
     n: u32,
-    /// Sum of the points' `known` and the lowest `view` (tagged downsampling only).
+    /// Sums of the points' `known` and `scene`, and the lowest `view` (tagged downsampling only).
     known: f64,
+    scene: f64,
     view: u8,
 }
 
@@ -187,7 +189,7 @@ impl VoxelTable {
             }
         }
         let e = self.entries.len();
-        self.entries.push(Entry { key, sum: [0.0; 3], n: 0, known: 0.0, view: u8::MAX });
+        self.entries.push(Entry { key, sum: [0.0; 3], n: 0, known: 0.0, scene: 0.0, view: u8::MAX });
         self.slots[s] = e as u32;
         if 2 * self.entries.len() > self.slots.len() {
             self.grow();
@@ -227,8 +229,9 @@ fn downsample_by_sort(points: &[Point], tags: Option<&[PointTag]>, inv: f64) -> 
             .clone()
             .map(|run| {
                 let known: f64 = run.iter().map(|&i| tags[i as usize].known as f64).sum();
+                let scene: f64 = run.iter().map(|&i| tags[i as usize].scene as f64).sum();
                 let view = run.iter().map(|&i| tags[i as usize].view).min().expect("a voxel has a point");
-                PointTag { known: (known / run.len() as f64) as f32, view }
+                PointTag { known: (known / run.len() as f64) as f32, scene: (scene / run.len() as f64) as f32, view }
             })
             .collect(),
         None => Vec::new(),
@@ -249,17 +252,19 @@ fn centroid_of(points: &[Point], run: &[u32]) -> Point {
 }
 
 /// Where a point of a generated target came from. For a raw point: `known` is 1 when it was re-projected
-/// from the source frame and 0 when a fill made it, `view` the target view it belongs to (0 = the pair's
-/// first). After [`voxel_downsample_tagged`]: `known` is the share of the voxel's points that were
-/// re-projected, `view` the lowest view among them.
+/// from the source frame, `scene` is 1 when the scene (the posed frames around the source) gave it, both
+/// 0 when a fill made it up; `view` the target view it belongs to (0 = the pair's first). After
+/// [`voxel_downsample_tagged`]: `known` and `scene` are the shares of the voxel's points of each kind,
+/// `view` the lowest view among them.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PointTag {
     pub known: f32,
+    pub scene: f32,
     pub view: u8,
 }
 
 /// [`voxel_downsample`] of `points` (the same points, bit for bit, in the same order) with each voxel's
-/// [`PointTag`] summary: the mean of its points' `known`, the minimum of their `view`.
+/// [`PointTag`] summary: the means of its points' `known` and `scene`, the minimum of their `view`.
 pub fn voxel_downsample_tagged(points: &[Point], tags: &[PointTag], voxel: f32) -> (Vec<Point>, Vec<PointTag>) {
     assert_eq!(points.len(), tags.len(), "one tag per point");
     downsample(points, Some(tags), voxel)
@@ -349,21 +354,31 @@ mod tests {
     /// Tagged downsampling against an independent summary (a BTreeMap keyed by voxel index, in the same
     /// lexicographic order), with tags that mix known and filled points and several views per voxel.
     fn check_tagged(pts: &[Point], voxel: f32) {
-        let tags: Vec<PointTag> = (0..pts.len()).map(|i| PointTag { known: (i % 3 != 0) as u8 as f32, view: (i % 5) as u8 }).collect();
+        // Three kinds: seen by the scene (i % 7 == 0), else re-projected (i % 3 != 0), else made up.
+        let tags: Vec<PointTag> = (0..pts.len())
+            .map(|i| {
+                let scene = i % 7 == 0;
+                PointTag { known: (i % 3 != 0 && !scene) as u8 as f32, scene: scene as u8 as f32, view: (i % 5) as u8 }
+            })
+            .collect();
         let (out, summary) = voxel_downsample_tagged(pts, &tags, voxel);
         assert_eq!(out, voxel_downsample(pts, voxel), "the same points as the untagged downsampling");
-        let mut m: BTreeMap<(i64, i64, i64), (f64, f64, u8)> = BTreeMap::new();
+        let mut m: BTreeMap<(i64, i64, i64), (f64, f64, f64, u8)> = BTreeMap::new();
         for (p, t) in pts.iter().zip(&tags) {
             let v = voxel as f64;
             let k = ((p.x as f64 / v).floor() as i64, (p.y as f64 / v).floor() as i64, (p.z as f64 / v).floor() as i64);
-            let e = m.entry(k).or_insert((0.0, 0.0, u8::MAX));
+            let e = m.entry(k).or_insert((0.0, 0.0, 0.0, u8::MAX));
             e.0 += t.known as f64;
-            e.1 += 1.0;
-            e.2 = e.2.min(t.view);
+            e.1 += t.scene as f64;
+            e.2 += 1.0;
+            e.3 = e.3.min(t.view);
         }
-        let expected: Vec<PointTag> = m.values().map(|e| PointTag { known: (e.0 / e.1) as f32, view: e.2 }).collect();
+        let expected: Vec<PointTag> = m.values().map(|e| PointTag { known: (e.0 / e.2) as f32, scene: (e.1 / e.2) as f32, view: e.3 }).collect();
         assert_eq!(summary, expected);
         assert!(summary.iter().any(|t| t.known > 0.0 && t.known < 1.0), "some voxels mix known and filled points");
+        if pts.len() / summary.len() >= 8 {
+            assert!(summary.iter().any(|t| t.scene > 0.0 && t.known > 0.0 && t.known + t.scene < 1.0), "some voxels mix all three kinds");
+        }
     }
 
     #[test]

@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 /// variants, not unit variants: serde then refuses a key such as `steps` beside `method = "background"`
 /// (it silently ignores extra keys of a unit variant of an internally tagged enum); the config loader
 /// adds which method has that setting ([`crate::pipeline::config::method_setting_hint`]).
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "method", rename_all = "snake_case", deny_unknown_fields)]
 pub enum InpaintConfig {
     /// No filling: the target keeps only the re-projected pixels.
@@ -24,6 +24,10 @@ pub enum InpaintConfig {
     IpBasic {},
     /// The diffusion model with the exact range–null-space step (paper §3.2, reference §5.4).
     Diffusion(DiffusionInpaintConfig),
+    /// For posed sequences: unknown pixels where the scene fused from the frames around the source frame
+    /// (`[scene]`) shows a surface get its ray-cast depth; `fallback` (any other method) fills the rest,
+    /// and fills everything for frames without a pose.
+    Scene { fallback: Box<InpaintConfig> },
 }
 
 impl InpaintConfig {
@@ -31,28 +35,41 @@ impl InpaintConfig {
     pub fn validate(&self, field: &str) -> crate::Result<()> {
         match self {
             InpaintConfig::Diffusion(c) => c.validate(field),
+            InpaintConfig::Scene { fallback } if fallback.is_scene() => Err(crate::Error::config(field, "the fallback of `scene` must be another method")),
+            InpaintConfig::Scene { fallback } => fallback.validate(&format!("{field}.fallback")),
             _ => Ok(()),
         }
     }
 
-    /// Calls `visit` on the checkpoint path, if any, as `<field>.checkpoint`.
+    /// Whether the method is `scene`.
+    pub fn is_scene(&self) -> bool {
+        matches!(self, InpaintConfig::Scene { .. })
+    }
+
+    /// Calls `visit` on the checkpoint path, if any, as `<field>.checkpoint` (`<field>.fallback.checkpoint`).
     pub fn for_each_path(&mut self, field: &str, visit: &mut dyn FnMut(&str, &mut std::path::PathBuf)) {
-        if let InpaintConfig::Diffusion(c) = self {
-            crate::config_paths::visit_model(visit, &format!("{field}.checkpoint"), &mut c.checkpoint);
+        match self {
+            InpaintConfig::Diffusion(c) => crate::config_paths::visit_model(visit, &format!("{field}.checkpoint"), &mut c.checkpoint),
+            InpaintConfig::Scene { fallback } => fallback.for_each_path(&format!("{field}.fallback"), visit),
+            _ => {}
         }
     }
 
-    /// The model file this method reads, if any.
+    /// The model file this method reads, if any (the fallback's, for `scene`).
     pub fn checkpoint(&self) -> Option<crate::nn::ModelPath> {
         match self {
             InpaintConfig::Diffusion(c) => Some(c.checkpoint),
+            InpaintConfig::Scene { fallback } => fallback.checkpoint(),
             _ => None,
         }
     }
 
-    /// The inpainter this config describes (call [`Self::validate`] first).
+    /// The inpainter this config describes (call [`Self::validate`] first); for `scene`, its fallback's
+    /// (the scene's own fill needs the scene, which [`crate::stages::inpaint`] pastes first:
+    /// [`crate::scene::paste_scene`]).
     pub fn build(&self) -> crate::Result<Box<dyn Inpainter>> {
         Ok(match self {
+            InpaintConfig::Scene { fallback } => fallback.build()?,
             InpaintConfig::None {} => Box::new(NoInpainting),
             InpaintConfig::PushPull {} => Box::new(PushPull),
             InpaintConfig::Nearest {} => Box::new(Nearest),

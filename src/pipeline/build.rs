@@ -15,6 +15,8 @@ use crate::stages::ingest::{Ingest, PreparedFrame};
 use crate::stages::inpaint::Inpaint;
 use crate::stages::pack::Pack;
 use crate::stages::reproject::Reproject;
+use crate::stages::scene::SceneStage;
+use crate::scene::Scene;
 use crate::stages::sink::ShardSink;
 use crate::stages::PairUnit;
 use std::collections::BTreeMap;
@@ -37,16 +39,27 @@ pub struct BuildOptions {
     /// unit's frame anew. Memory: about 1 MB per frame at the working size 256. (`build` only: labels
     /// read their windows' frames once each anyway.)
     pub frame_cache: usize,
+    /// Scenes kept fused for the next units of their block (`scene` methods only); 0 fuses each unit's
+    /// scene anew. Memory: a few tens of MB per scene at the default 1 cm voxels.
+    pub scene_cache: usize,
 }
 
 impl BuildOptions {
     /// Frames kept by default: enough for the frames in flight on every worker thread.
     pub const FRAME_CACHE: usize = 16;
+    /// Scenes kept by default: units come in frame order, so the block in work and the next one.
+    pub const SCENE_CACHE: usize = 2;
 
-    /// One worker of one, building into `out`: not strict, no progress bars, the default frame cache.
+    /// One worker of one, building into `out`: not strict, no progress bars, the default caches.
     pub fn into_folder(out: impl Into<PathBuf>) -> Self {
-        BuildOptions { out: out.into(), worker: 0, workers: 1, strict: false, progress: false, frame_cache: Self::FRAME_CACHE }
+        BuildOptions { out: out.into(), worker: 0, workers: 1, strict: false, progress: false, frame_cache: Self::FRAME_CACHE, scene_cache: Self::SCENE_CACHE }
     }
+}
+
+/// The caches the stages of one build share.
+struct Caches {
+    frames: Arc<FrameCache<PreparedFrame>>,
+    scenes: Arc<FrameCache<Scene>>,
 }
 
 /// What a build did.
@@ -66,6 +79,8 @@ pub struct BuildReport {
     /// Frames this run prepared (decoded, resized, back-projected): once per frame with the frame
     /// cache, once per unit without it.
     pub frames_prepared: u64,
+    /// Scenes this run fused (once per block of source frames with a `scene` method, none without).
+    pub scenes_fused: u64,
     pub summary: RunSummary,
 }
 
@@ -98,7 +113,9 @@ pub fn run_build(config: &BuildConfig, opts: &BuildOptions, cancel: &CancelToken
         })
     };
     let frames = Arc::new(FrameCache::new(opts.frame_cache));
-    let stages = build_stages(config, &identity.content_hash, catalog, frames.clone(), opts.strict, rayon::current_num_threads())?;
+    let scenes = Arc::new(FrameCache::new(opts.scene_cache));
+    let caches = Caches { frames: frames.clone(), scenes: scenes.clone() };
+    let stages = build_stages(config, &identity.content_hash, catalog, caches, opts.strict, rayon::current_num_threads())?;
     let mut sink = ShardSink::new(&dataset, config.shard_size, total_units, todo);
     let summary = run_pipeline(units, stages, &mut sink, todo_units, opts.progress, cancel)?;
     Ok(BuildReport {
@@ -110,6 +127,7 @@ pub fn run_build(config: &BuildConfig, opts: &BuildOptions, cancel: &CancelToken
         committed_now: sink.committed.clone(),
         rows_by_status: sink.rows_by_status.clone(),
         frames_prepared: frames.made(),
+        scenes_fused: scenes.made(),
         summary,
     })
 }
@@ -121,10 +139,11 @@ fn build_stages(
     config: &BuildConfig,
     content_hash: &str,
     catalog: Arc<Catalog>,
-    frames: Arc<FrameCache<PreparedFrame>>,
+    caches: Caches,
     strict: bool,
     threads: usize,
 ) -> Result<Vec<StageSpec<PairUnit>>> {
+    let Caches { frames, scenes } = caches;
     let w = &config.working;
     let n = threads;
     let mut inpainters = (0..n).map(|_| config.inpaint.build()).collect::<Result<Vec<_>>>()?.into_iter();
@@ -146,10 +165,16 @@ fn build_stages(
             config.pose.build(&config.correct.condition, w.depth_range(), w.crop_box, config.voxelize.voxel, config.validate.radius)
         }),
         StageSpec::replicated(n, || Reproject),
-        StageSpec::replicated(n, || config.correct.build(Target::Condition)),
-        StageSpec::replicated(n, || Inpaint { inpainter: inpainters.next().expect("one inpainter per worker") }),
-        StageSpec::replicated(n, || config.correct.build(Target::Output)),
     ];
+    if config.uses_scene() {
+        stages.push(StageSpec::replicated(n, || SceneStage { catalog: catalog.clone(), config: config.scene.clone(), scenes: scenes.clone() }));
+    }
+    let scene_fill = config.inpaint.is_scene();
+    stages.extend([
+        StageSpec::replicated(n, || config.correct.build(Target::Condition)),
+        StageSpec::replicated(n, || Inpaint { inpainter: inpainters.next().expect("one inpainter per worker"), scene: scene_fill }),
+        StageSpec::replicated(n, || config.correct.build(Target::Output)),
+    ]);
     if !sv.is_off() {
         stages.push(StageSpec::replicated(n, || {
             let inpainter = successive_inpainters.next().expect("one inpainter per worker");
@@ -177,15 +202,19 @@ fn stages_json(resolved: &BuildConfig) -> String {
     let (c, i, o) = (&resolved.correct.condition, &resolved.inpaint, &resolved.correct.output);
     let (condition_model, inpaint_model, output_model) = (model_hash(c.checkpoint()), model_hash(i.checkpoint()), model_hash(o.checkpoint()));
     let successive = (!config.successive.is_off()).then(|| serde_json::json!({"stage": "successive", "params": config.successive}));
+    let scene = config.uses_scene().then(|| serde_json::json!({"stage": "scene", "params": config.scene}));
     let v: Vec<serde_json::Value> = [
         serde_json::json!({"stage": "ingest", "select": config.select, "working": config.working}),
         serde_json::json!({"stage": "pose", "sampler": "pivot", "params": config.pose}),
         serde_json::json!({"stage": "reproject", "zbuffer": "nearest", "rounding": "half_even"}),
+    ]
+    .into_iter()
+    .chain(scene)
+    .chain([
         serde_json::json!({"stage": "correct_condition", "params": config.correct.condition, "model_blake3": condition_model}),
         serde_json::json!({"stage": "inpaint", "params": config.inpaint, "model_blake3": inpaint_model}),
         serde_json::json!({"stage": "correct_output", "params": config.correct.output, "model_blake3": output_model}),
-    ]
-    .into_iter()
+    ])
     .chain(successive)
     .chain([
         serde_json::json!({"stage": "voxelize", "params": config.voxelize}),

@@ -12,6 +12,7 @@ use crate::config_paths::{identity_toml, ConfigIdentity, ConfigPaths};
 use crate::error::{Error, Result};
 use crate::inpainting::InpaintConfig;
 use crate::nn::ModelPath;
+use crate::scene::SceneConfig;
 use crate::sources::{SelectConfig, SourceConfig};
 use crate::stages::correct::CorrectConfig;
 use crate::stages::ingest::WorkingConfig;
@@ -53,6 +54,10 @@ pub struct BuildConfig {
     /// How unknown target pixels are filled.
     #[serde(default = "default_inpaint")]
     pub inpaint: InpaintConfig,
+    /// For posed sequences: the frames around each source frame fused into the scene that the `scene`
+    /// methods of `[correct]` and `[inpaint]` ray-cast. Written out only when not the default.
+    #[serde(default, skip_serializing_if = "SceneConfig::is_default")]
+    pub scene: SceneConfig,
     /// The official "successive" mode: several target views per pair sharing a growing scene memory,
     /// fused into one target cloud. Off (one view) by default, as in the authors' dataset generation.
     #[serde(default, skip_serializing_if = "SuccessiveConfig::is_off")]
@@ -85,11 +90,13 @@ fn default_inpaint() -> InpaintConfig {
 /// The settings of the methods of the `[inpaint]` and `[correct.*]` sections (a method not listed has
 /// none), for the hint of [`method_setting_hint`]; `tests::setting_lists_match_the_config_types` keeps
 /// them equal to the config types' fields.
-const METHOD_SETTINGS: [(&str, &[&str]); 4] = [
+const METHOD_SETTINGS: [(&str, &[&str]); 6] = [
     ("inpaint method \"diffusion\"", &["checkpoint", "steps", "eta", "start", "start_step", "batch", "resample"]),
     ("correction method \"min_pool\"", &["threshold"]),
     ("correction method \"median\"", &["window", "threshold"]),
     ("correction method \"unet\"", &["checkpoint", "threshold", "preset"]),
+    ("correction method \"scene\"", &["margin", "fallback"]),
+    ("inpaint method \"scene\"", &["fallback"]),
 ];
 
 /// For a config error about an unknown field (`unknown field `steps``), which methods have that setting:
@@ -136,6 +143,11 @@ impl BuildConfig {
         Ok(ConfigIdentity::new(identity_toml(&dataset)?, &identity_toml(&content)?))
     }
 
+    /// Whether a correction or the fill is `scene` (the build then fuses scenes for posed frames).
+    pub fn uses_scene(&self) -> bool {
+        self.correct.uses_scene() || self.inpaint.is_scene()
+    }
+
     /// Checks every range before any work starts (and that model checkpoints load); the error names the key.
     pub fn validate(&self) -> Result<()> {
         if self.samples_per_frame == 0 || self.samples_per_frame > 10_000 {
@@ -150,7 +162,11 @@ impl BuildConfig {
         self.pose.validate()?;
         self.correct.validate()?;
         self.inpaint.validate("inpaint")?;
+        self.scene.validate()?;
         self.successive.validate()?;
+        if self.uses_scene() && !self.successive.is_off() {
+            return Err(Error::config("successive.views", "successive views do not combine with `scene` methods: use one view per pair"));
+        }
         self.output.validate()?;
         self.voxelize.validate()?;
         self.validate.validate()
@@ -283,6 +299,8 @@ mod method_setting_tests {
             keys(CorrectionConfig::Median { window: 3, threshold: 0.1 }),
             keys(unet),
         ];
+        let lists = [lists[0].clone(), lists[1].clone(), lists[2].clone(), keys(CorrectionConfig::scene(CorrectionConfig::OFFICIAL_MIN_POOL))];
+        let mut scene_fill = keys(InpaintConfig::Scene { fallback: Box::new(InpaintConfig::None {}) });
         let mut want: Vec<Vec<String>> = METHOD_SETTINGS.iter().map(|(_, k)| k.iter().map(|s| s.to_string()).collect()).collect();
         want.iter_mut().for_each(|w| w.sort());
         got.sort();
@@ -291,6 +309,8 @@ mod method_setting_tests {
             l.sort();
             assert_eq!(l, want[i + 1]);
         }
+        scene_fill.sort();
+        assert_eq!(scene_fill, want[5]);
         for m in [InpaintConfig::None {}, InpaintConfig::Background {}, InpaintConfig::Nearest {}, InpaintConfig::PushPull {}, InpaintConfig::IpBasic {}] {
             assert!(keys(m).is_empty());
         }

@@ -7,4 +7,4 @@ pub mod read;
 pub mod write;
 
 pub use read::{decode_ply, read_ply};
-pub use write::{encode_mesh, encode_points, encode_points_with_provenance, write_mesh, write_points, write_points_with_provenance};
+pub use write::{encode_mesh, encode_points, encode_points_with_provenance, write_mesh, write_points, write_points_with_provenance, Provenance};

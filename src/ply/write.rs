@@ -27,34 +27,52 @@ pub fn write_points(path: &Path, points: &[Point]) -> Result<()> {
     write_bytes(path, &encode_points(points))
 }
 
-/// A target cloud with its per-point provenance: [`encode_points`] plus two vertex properties,
-/// `property float known_share` and `property uchar view` (the `target_known_share` and `target_view`
-/// columns). Without provenance (empty lists: a version-1 dataset), the plain cloud.
-pub fn encode_points_with_provenance(points: &[Point], known_share: &[f32], view: &[u8]) -> Vec<u8> {
-    if known_share.len() != points.len() || view.len() != points.len() {
+/// The per-point provenance of a target cloud (the `target_known_share`, `target_scene_share` and
+/// `target_view` columns), each list aligned with the points or empty.
+#[derive(Clone, Copy)]
+pub struct Provenance<'a> {
+    pub known_share: &'a [f32],
+    pub scene_share: &'a [f32],
+    pub view: &'a [u8],
+}
+
+impl<'a> Provenance<'a> {
+    /// The provenance of a row's target cloud.
+    pub fn of(row: &'a crate::shards::PairRow) -> Self {
+        Provenance { known_share: &row.target_known_share, scene_share: &row.target_scene_share, view: &row.target_view }
+    }
+}
+
+/// A target cloud with its per-point provenance: [`encode_points`] plus three vertex properties,
+/// `property float known_share`, `property float scene_share` and `property uchar view`. Without
+/// provenance (lists not aligned with the points: a version-1 dataset), the plain cloud.
+pub fn encode_points_with_provenance(points: &[Point], p: Provenance) -> Vec<u8> {
+    let n = points.len();
+    if p.known_share.len() != n || p.scene_share.len() != n || p.view.len() != n {
         return encode_points(points);
     }
     let header = format!(
         "ply\nformat binary_little_endian 1.0\ncomment written by pointreggpt\n\
-         comment known_share: share of the voxel's points re-projected from the source frame; view: first target view\n\
-         element vertex {}\nproperty float x\nproperty float y\nproperty float z\n\
-         property float known_share\nproperty uchar view\nend_header\n",
-        points.len()
+         comment known_share: share of the voxel's points re-projected from the source frame; scene_share: \
+         seen by the posed frames around it (the rest a fill made up); view: first target view\n\
+         element vertex {n}\nproperty float x\nproperty float y\nproperty float z\n\
+         property float known_share\nproperty float scene_share\nproperty uchar view\nend_header\n"
     );
-    let mut out = Vec::with_capacity(header.len() + 17 * points.len());
+    let mut out = Vec::with_capacity(header.len() + 21 * n);
     out.extend_from_slice(header.as_bytes());
-    for ((p, k), v) in points.iter().zip(known_share).zip(view) {
-        for c in [p.x, p.y, p.z, *k] {
+    for i in 0..n {
+        let q = &points[i];
+        for c in [q.x, q.y, q.z, p.known_share[i], p.scene_share[i]] {
             out.extend_from_slice(&c.to_le_bytes());
         }
-        out.push(*v);
+        out.push(p.view[i]);
     }
     out
 }
 
 /// Writes [`encode_points_with_provenance`] to `path`, creating parent folders.
-pub fn write_points_with_provenance(path: &Path, points: &[Point], known_share: &[f32], view: &[u8]) -> Result<()> {
-    write_bytes(path, &encode_points_with_provenance(points, known_share, view))
+pub fn write_points_with_provenance(path: &Path, points: &[Point], provenance: Provenance) -> Result<()> {
+    write_bytes(path, &encode_points_with_provenance(points, provenance))
 }
 
 /// A triangle mesh (vertex positions, triangles as vertex indices) as a binary little-endian PLY:

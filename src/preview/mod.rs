@@ -49,11 +49,18 @@ pub fn write_previews(ds: &Dataset, opts: &PreviewOptions) -> Result<Vec<PathBuf
     Ok(files)
 }
 
-/// Counts the rows of `ds` matching `filter` with one SQL aggregate over the committed shards
-/// ([`stats::counts_sql`]): no row is decoded.
+/// Counts the rows of `ds` matching `filter` with SQL aggregates over the committed shards
+/// ([`stats::counts_sql`], [`stats::paths_sql`]): no row is decoded. Datasets older than the scene
+/// (schema before `pairs/3`) have every row on the single-map path.
 pub fn collect_stats(ds: &Dataset, filter: &Filter) -> Result<Stats> {
     let batches = crate::query::run_query_on(ds, &stats::counts_sql(filter.sql()))?;
-    Stats::from_counts(&batches)
+    let mut stats = Stats::from_counts(&batches)?;
+    if ds.header().schema_version == crate::shards::SCHEMA_VERSION {
+        stats.add_paths(&crate::query::run_query_on(ds, &stats::paths_sql(filter.sql()))?)?;
+    } else {
+        stats.per_path.insert(stats::PATHS[1].to_string(), stats.total.by_status);
+    }
+    Ok(stats)
 }
 
 /// Writes `stats.txt` and `stats.png` into `out` (created); returns the text.

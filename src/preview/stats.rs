@@ -1,6 +1,7 @@
-//! Dataset statistics: rows by status (the reject reasons) and the overlap histograms of the `ok`
-//! pairs (10 bins over [0, 1], `overlap_source` and `overlap_target`), counted by one SQL aggregate
-//! ([`counts_sql`]) and shown as a text table and a bar plot.
+//! Dataset statistics: rows by status (the reject reasons), the overlap histograms of the `ok` pairs (10
+//! bins over [0, 1], `overlap_source` and `overlap_target`) and the rows by the path their target took
+//! (the scene, or the single map), counted by SQL aggregates ([`counts_sql`], [`paths_sql`]) and shown
+//! as a text table and a bar plot.
 
 use super::canvas::{text_width, Canvas, Rgb};
 use super::colormap::{BACKGROUND, TEXT};
@@ -56,6 +57,22 @@ pub fn counts_sql(predicate: Option<&str>) -> String {
     )
 }
 
+/// The path a unit's target took: `scene` (a `scene` method had the posed frames around its source
+/// frame, `scene_frames > 0`) or `single-map` (the source depth map alone).
+pub const PATHS: [&str; 2] = ["scene", "single-map"];
+
+/// The aggregate of the rows per path ([`PATHS`]) and status, of the rows where `predicate` holds
+/// (version-3 datasets; older ones have no scene).
+pub fn paths_sql(predicate: Option<&str>) -> String {
+    let filter = predicate.map_or(String::new(), |p| format!("where (\n{p}\n)\n"));
+    format!(
+        "select path, status, count(*) as n from (\n\
+         select case when scene_frames > 0 then '{}' else '{}' end as path, status from pairs\n{filter}) as p\n\
+         group by path, status",
+        PATHS[0], PATHS[1]
+    )
+}
+
 /// Counts over a set of rows.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Counts {
@@ -86,6 +103,8 @@ impl Counts {
 pub struct Stats {
     pub total: Counts,
     pub per_scene: BTreeMap<String, Counts>,
+    /// Rows per path ([`PATHS`]) and status (in [`STATUSES`] order).
+    pub per_path: BTreeMap<String, [u64; 4]>,
 }
 
 fn bin_label(b: usize) -> String {
@@ -101,6 +120,19 @@ impl Stats {
         }
         self.total.add(status, source_bin, target_bin, rows);
         self.per_scene.entry(scene.to_string()).or_default().add(status, source_bin, target_bin, rows);
+        Ok(())
+    }
+
+    /// Adds the result of [`paths_sql`].
+    pub fn add_paths(&mut self, batches: &[RecordBatch]) -> Result<()> {
+        for b in batches {
+            let (path, status) = (column::<StringArray>(b, 0, DataType::Utf8)?, column::<StringArray>(b, 1, DataType::Utf8)?);
+            let n = column::<Int64Array>(b, 2, DataType::Int64)?;
+            for r in 0..b.num_rows() {
+                let st = Status::parse(status.value(r)).ok_or_else(|| Error::Parquet(format!("stats: unknown status '{}'", status.value(r))))?;
+                self.per_path.entry(path.value(r).to_string()).or_default()[STATUSES.iter().position(|s| *s == st).expect("listed")] += n.value(r) as u64;
+            }
+        }
         Ok(())
     }
 
@@ -130,6 +162,20 @@ impl Stats {
             let _ = writeln!(s, "{:<16}{n:>10}", st.as_str());
         }
         let _ = writeln!(s, "{:<16}{:>10}\n", "total", t.rows());
+        let _ = write!(s, "rows by path of the target\n{:<12}", "path");
+        STATUSES.iter().for_each(|st| {
+            let _ = write!(s, "{:>16}", st.as_str());
+        });
+        let _ = writeln!(s);
+        for path in PATHS {
+            let counts = self.per_path.get(path).copied().unwrap_or_default();
+            let _ = write!(s, "{path:<12}");
+            counts.iter().for_each(|n| {
+                let _ = write!(s, "{n:>16}");
+            });
+            let _ = writeln!(s);
+        }
+        let _ = writeln!(s);
         let _ = writeln!(s, "overlap of ok pairs ({} pairs)\n{:<12}{:>16}{:>16}", t.by_status[0], "bin", "overlap_source", "overlap_target");
         for b in 0..BINS {
             let _ = writeln!(s, "{:<12}{:>16}{:>16}", bin_label(b), t.hist_source[b], t.hist_target[b]);
@@ -261,8 +307,10 @@ mod tests {
         assert_eq!(st.total.hist_target[1], 1);
         assert_eq!(st.per_scene["a"].by_status, [1, 1, 0, 0]);
         assert!(st.add("a", Status::Ok, BINS, 0, 1).is_err());
+        st.per_path.insert("scene".into(), [2, 0, 1, 0]);
         let text = st.table(true);
         assert!(text.contains("ok                       2\nlow_overlap              1\n"), "{text}");
+        assert!(text.contains("scene                      2               0               1               0\nsingle-map                 0"), "{text}");
         assert!(text.contains("[0.9, 1.0]"));
         assert!(text.contains("rows by status per scene"));
         let plot = st.plot();
@@ -307,5 +355,29 @@ mod tests {
         assert_eq!(sql_stats(&rows, None), want);
         let even = "unit_index % 2 = 0 -- a comment stops at the end of the predicate";
         assert_eq!(sql_stats(&rows, Some(even)), want_even);
+    }
+
+    #[test]
+    fn the_paths_are_counted_by_scene_frames() {
+        // An independent count: rows with scene_frames > 0 by status, against the SQL aggregate.
+        let mut rows = Vec::new();
+        let mut want: BTreeMap<String, [u64; 4]> = BTreeMap::new();
+        for i in 0..23u64 {
+            let mut r = empty_row();
+            r.scene_frames = if i % 3 == 0 { 0 } else { i as u32 };
+            r.status = STATUSES[(i % 4) as usize];
+            (r.pair_key, r.unit_index) = (format!("p{i}#0"), i);
+            want.entry(if r.scene_frames > 0 { "scene" } else { "single-map" }.into()).or_default()[(i % 4) as usize] += 1;
+            rows.push(r);
+        }
+        let runtime = tokio::runtime::Builder::new_current_thread().build().unwrap();
+        let batches = runtime.block_on(async {
+            let ctx = SessionContext::new();
+            ctx.register_batch("pairs", crate::shards::pairs_to_batch(&rows).unwrap()).unwrap();
+            ctx.sql(&paths_sql(None)).await.unwrap().collect().await.unwrap()
+        });
+        let mut st = Stats::default();
+        st.add_paths(&batches).unwrap();
+        assert_eq!(st.per_path, want);
     }
 }

@@ -67,8 +67,8 @@ impl Dataset {
             *by_status.entry(r.status.as_str().to_string()).or_insert(0) += 1;
         }
         let mut batch = pairs_to_batch(rows)?;
-        if self.header.schema_version == super::schema::SCHEMA_VERSION_1 {
-            batch = super::pairs_v1::downgrade(&batch)?; // a resumed version-1 dataset stays version 1
+        if self.header.schema_version != super::schema::SCHEMA_VERSION {
+            batch = super::pairs_versions::downgrade(&batch, &self.header.schema_version)?; // a resumed dataset keeps its version
         }
         self.commit_shard(PAIRS_TABLE, shard, first_unit, units, &batch, by_status)
     }

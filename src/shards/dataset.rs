@@ -199,10 +199,10 @@ fn check_schema_version(store: &dyn DatasetStore, header: &DatasetHeader) -> Res
     Err(Error::input(
         store.locate(DATASET_FILE),
         format!(
-            "the dataset's schema is {}, this {CODE_VERSION} reads and writes {} and {SCHEMA_VERSION}: use a \
+            "the dataset's schema is {}, this {CODE_VERSION} reads and writes {}: use a \
              matching pointreggpt, or build into a new output folder",
             header.schema_version,
-            super::schema::SCHEMA_VERSION_1
+            super::schema::PAIRS_VERSIONS.join(", ")
         ),
     ))
 }

@@ -12,8 +12,8 @@
 //!                                               ([`delta`]: a view of the manifest that publishing keeps current)
 //! ```
 //!
-//! Tables: `pairs` ([`PairRow`], schema `pairs/2`, `schemas/pairs-v2.md`; version-1 datasets are read and
-//! resumed through [`pairs_v1`]) and any other table a module
+//! Tables: `pairs` ([`PairRow`], schema `pairs/3`, `schemas/pairs-v3.md`; version-1 and version-2 datasets
+//! are read and resumed through [`pairs_versions`]) and any other table a module
 //! brings as a [`RecordBatch`](arrow::array::RecordBatch) (`labels`), committed with
 //! [`Dataset::commit_shard`].
 //!
@@ -49,7 +49,7 @@ pub mod delta;
 pub mod labels;
 pub mod manifest;
 pub mod pairs;
-pub mod pairs_v1;
+pub mod pairs_versions;
 pub mod plan;
 pub mod read;
 pub mod parquet_io;
@@ -64,7 +64,7 @@ pub use manifest::ManifestEntry;
 pub use pairs::{batch_to_pairs, pairs_to_batch};
 pub use parquet_io::{read_parquet_bytes, read_parquet_file, write_parquet_bytes, ROW_GROUP_ROWS};
 pub use row::{PairRow, StageTiming, Status};
-pub use schema::{pairs_schema, pairs_schema_of, SCHEMA_VERSION, SCHEMA_VERSION_1, SCHEMA_VERSION_KEY};
+pub use schema::{pairs_schema, pairs_schema_of, PAIRS_VERSIONS, SCHEMA_VERSION, SCHEMA_VERSION_1, SCHEMA_VERSION_2, SCHEMA_VERSION_KEY};
 pub use verify::{Problem, RepairReport, VerifyReport};
 
 /// The code version recorded in rows, manifest entries and `dataset.toml`.

@@ -1,9 +1,9 @@
-//! [`PairRow`]s ↔ an Arrow [`RecordBatch`] of the pairs v2 schema, an exact round trip. Version-1
-//! batches are read too (through [`super::pairs_v1::to_current`]).
+//! [`PairRow`]s ↔ an Arrow [`RecordBatch`] of the pairs v3 schema, an exact round trip. Version-1 and
+//! version-2 batches are read too (through [`super::pairs_versions::to_current`]).
 //!
 //! Unsigned row fields are stored in signed columns bit for bit (`seed as i64`); reading casts back.
 
-use super::pairs_v1::to_current;
+use super::pairs_versions::to_current;
 use super::row::{PairRow, StageTiming, Status};
 use super::schema::{list_item, pairs_schema, timing_fields, type_notation};
 use crate::error::{Error, Result};
@@ -15,7 +15,7 @@ use arrow::array::{
 use arrow::buffer::OffsetBuffer;
 use std::sync::Arc;
 
-/// Builds one batch (pairs v2 schema) holding `rows` in order.
+/// Builds one batch (pairs v3 schema) holding `rows` in order.
 pub fn pairs_to_batch(rows: &[PairRow]) -> Result<RecordBatch> {
     let schema = pairs_schema();
     let ty = |name: &str| schema.field_with_name(name).expect("pairs schema column").data_type().clone();
@@ -54,6 +54,11 @@ pub fn pairs_to_batch(rows: &[PairRow]) -> Result<RecordBatch> {
         Arc::new(Float32Array::from_iter_values(rows.iter().flat_map(|r| r.target_known_share.iter().copied()))),
         &|r| r.target_known_share.len(),
     )?;
+    let scene_share = provenance(
+        "target_scene_share",
+        Arc::new(Float32Array::from_iter_values(rows.iter().flat_map(|r| r.target_scene_share.iter().copied()))),
+        &|r| r.target_scene_share.len(),
+    )?;
     let view = provenance(
         "target_view",
         Arc::new(Int8Array::from_iter_values(rows.iter().flat_map(|r| r.target_view.iter().map(|&v| v as i8)))),
@@ -85,9 +90,11 @@ pub fn pairs_to_batch(rows: &[PairRow]) -> Result<RecordBatch> {
         vectors("target_intrinsics", |r| &r.target_intrinsics)?,
         vectors("t_target_from_source", |r| &r.t_target_from_source)?,
         u32s(|r| r.pose_draws),
+        u32s(|r| r.scene_frames),
         clouds("source_points", |r| &r.source_points)?,
         clouds("target_points", |r| &r.target_points)?,
         known_share,
+        scene_share,
         view,
         f64s(|r| r.overlap_source),
         f64s(|r| r.overlap_target),
@@ -103,7 +110,7 @@ pub fn pairs_to_batch(rows: &[PairRow]) -> Result<RecordBatch> {
     RecordBatch::try_new(schema, columns).map_err(|e| Error::Parquet(format!("building a pairs batch: {e}")))
 }
 
-/// Reads every row of a pairs batch (v2, or v1: its rows get empty provenance lists). Errors name the
+/// Reads every row of a pairs batch (v3, or an earlier version: [`to_current`]). Errors name the
 /// column when the batch does not match its version's schema.
 pub fn batch_to_pairs(batch: &RecordBatch) -> Result<Vec<PairRow>> {
     let batch = &to_current(batch)?;
@@ -124,9 +131,11 @@ pub fn batch_to_pairs(batch: &RecordBatch) -> Result<Vec<PairRow>> {
     let target_intrinsics = c.vectors::<4>("target_intrinsics")?;
     let t_target_from_source = c.vectors::<16>("t_target_from_source")?;
     let pose_draws = c.get::<Int32Array>("pose_draws")?;
+    let scene_frames = c.get::<Int32Array>("scene_frames")?;
     let source_points = c.clouds("source_points")?;
     let target_points = c.clouds("target_points")?;
     let known_share = c.lists::<Float32Array>("target_known_share")?;
+    let scene_share = c.lists::<Float32Array>("target_scene_share")?;
     let view = c.lists::<Int8Array>("target_view")?;
     let overlap_source = c.get::<Float64Array>("overlap_source")?;
     let overlap_target = c.get::<Float64Array>("overlap_target")?;
@@ -164,9 +173,11 @@ pub fn batch_to_pairs(batch: &RecordBatch) -> Result<Vec<PairRow>> {
                 target_intrinsics: target_intrinsics[i],
                 t_target_from_source: t_target_from_source[i],
                 pose_draws: pose_draws.value(i) as u32,
+                scene_frames: scene_frames.value(i) as u32,
                 source_points: source_points.next().expect("one cloud per row"),
                 target_points: target_points.next().expect("one cloud per row"),
                 target_known_share: known_share.0.values()[known_share.1[i]..known_share.1[i + 1]].to_vec(),
+                target_scene_share: scene_share.0.values()[scene_share.1[i]..scene_share.1[i + 1]].to_vec(),
                 target_view: view.0.values()[view.1[i]..view.1[i + 1]].iter().map(|&v| v as u8).collect(),
                 overlap_source: overlap_source.value(i),
                 overlap_target: overlap_target.value(i),
@@ -327,9 +338,11 @@ pub(crate) mod tests {
             target_intrinsics: [100.5, 101.25, 80.0, 60.0 + unit as f64],
             t_target_from_source: pose,
             pose_draws: k as u32 + 1,
+            scene_frames: (k % 3) as u32 * 17,
             source_points: if status == Status::InputError { vec![] } else { cloud(10 + 7 * k, 0.01) },
             target_points: if status == Status::InputError { vec![] } else { cloud(3 + 5 * k, -0.02) },
             target_known_share: if status == Status::InputError { vec![] } else { (0..3 + 5 * k).map(|i| (i % 4) as f32 / 3.0).collect() },
+            target_scene_share: if status == Status::InputError { vec![] } else { (0..3 + 5 * k).map(|i| (3 - i % 4) as f32 / 6.0).collect() },
             target_view: if status == Status::InputError { vec![] } else { (0..3 + 5 * k).map(|i| (i % 3) as u8).collect() },
             overlap_source: 0.1 + 0.3 * (k % 3) as f64,
             overlap_target: 1.0 / (1.0 + k as f64),

@@ -161,8 +161,8 @@ mod tests {
         assert_eq!(meta.num_row_groups(), 150usize.div_ceil(ROW_GROUP_ROWS), "150 rows in groups of at most {ROW_GROUP_ROWS}");
         for rg in meta.row_groups() {
             assert!(rg.num_rows() as usize <= ROW_GROUP_ROWS);
-            // 30 columns, clouds and provenance lists give one leaf each, timings two.
-            assert_eq!(rg.num_columns(), 31);
+            // 32 columns, clouds and provenance lists give one leaf each, timings two.
+            assert_eq!(rg.num_columns(), 33);
             for col in rg.columns() {
                 assert!(
                     matches!(col.compression(), Compression::ZSTD(_)),
@@ -187,6 +187,7 @@ mod tests {
             let dictionary = col.dictionary_page_offset().is_some();
             let expect = !(name.contains("points")
                 || name.contains("known_share")
+                || name.contains("scene_share")
                 || name.contains("png")
                 || name.contains("intrinsics")
                 || name.starts_with("t_target"));

@@ -41,7 +41,7 @@ pub struct StageTiming {
     pub ms: f64,
 }
 
-/// One row of the `pairs` table (schema v2, `schemas/pairs-v2.md`).
+/// One row of the `pairs` table (schema v3, `schemas/pairs-v3.md`).
 ///
 /// Clouds are each in their own camera frame; `t_target_from_source` maps source-camera points into the
 /// target camera (`p_t = R·p_s + t`), row-major 4×4.
@@ -74,12 +74,18 @@ pub struct PairRow {
     pub t_target_from_source: [f64; 16],
     /// How many poses the sampler drew before accepting one.
     pub pose_draws: u32,
+    /// Frames fused into the unit's scene (the posed frames around the source frame that a `scene`
+    /// method ray-casts); 0 when the unit took the single-map path (no `scene` method, or no pose).
+    pub scene_frames: u32,
     /// Voxelized clouds, each in its own camera frame, metres.
     pub source_points: Vec<Point>,
     pub target_points: Vec<Point>,
     /// Per target point: the share of its voxel's points re-projected from the source frame (1 = all
     /// re-projected, 0 = all made by the fill). Empty when unknown (version-1 datasets, input errors).
     pub target_known_share: Vec<f32>,
+    /// Per target point: the share of its voxel's points that the scene gave (seen by the posed frames
+    /// around the source). `1 − known − scene` is the share a fill made up. Empty when unknown.
+    pub target_scene_share: Vec<f32>,
     /// Per target point: the first target view (0 = the pair's first) whose points fall in its voxel; all
     /// 0 without successive views. Empty when unknown.
     pub target_view: Vec<u8>,
@@ -126,9 +132,11 @@ impl Default for PairRow {
             target_intrinsics: [0.0; 4],
             t_target_from_source: identity,
             pose_draws: 0,
+            scene_frames: 0,
             source_points: Vec::new(),
             target_points: Vec::new(),
             target_known_share: Vec::new(),
+            target_scene_share: Vec::new(),
             target_view: Vec::new(),
             overlap_source: 0.0,
             overlap_target: 0.0,
@@ -169,11 +177,13 @@ impl PairRow {
             s(&v.to_le_bytes());
         }
         s(&self.pose_draws.to_le_bytes());
+        s(&self.scene_frames.to_le_bytes());
         for cloud in [&self.source_points, &self.target_points] {
             let bytes: Vec<u8> = cloud.iter().flat_map(|p| [p.x, p.y, p.z]).flat_map(f32::to_le_bytes).collect();
             s(&bytes);
         }
         s(&self.target_known_share.iter().flat_map(|v| v.to_le_bytes()).collect::<Vec<u8>>());
+        s(&self.target_scene_share.iter().flat_map(|v| v.to_le_bytes()).collect::<Vec<u8>>());
         s(&self.target_view);
         s(&self.overlap_source.to_le_bytes());
         s(&self.overlap_target.to_le_bytes());

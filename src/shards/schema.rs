@@ -1,12 +1,13 @@
-//! The Arrow schema of the `pairs` table, version 2 (`schemas/pairs-v2.md` is its human-readable twin),
-//! and version 1, which datasets built before it still hold (`schemas/pairs-v1.md`; read and resumed
-//! through [`super::pairs_v1`]).
+//! The Arrow schema of the `pairs` table, version 3 (`schemas/pairs-v3.md` is its human-readable twin),
+//! and versions 1 and 2, which datasets built before it still hold (`schemas/pairs-v1.md`, `pairs-v2.md`;
+//! read and resumed through [`super::pairs_versions`]).
 //!
 //! One column per [`PairRow`](super::row::PairRow) field, in the same order. No column is nullable: a
-//! value that is "not stored" is an empty list or an empty binary. Version 2 has only signed integers
+//! value that is "not stored" is an empty list or an empty binary. Since version 2 only signed integers
 //! (data-lake engines such as Delta, Spark and Trino have no unsigned ones; the 64-bit seed is stored bit
-//! for bit as `int64`) and the per-point provenance of the target cloud. The schema's metadata carries
-//! `schema_version`, which every Parquet shard embeds.
+//! for bit as `int64`) and the per-point provenance of the target cloud; version 3 adds the scene (the
+//! points the posed frames around the source saw, and how many frames the unit's scene fused). The
+//! schema's metadata carries `schema_version`, which every Parquet shard embeds.
 
 use arrow::datatypes::{DataType, Field, FieldRef, Fields, Schema, SchemaRef};
 use std::collections::HashMap;
@@ -14,10 +15,14 @@ use std::sync::{Arc, OnceLock};
 
 /// The version of the pairs schema this code writes, stored in the Arrow schema metadata under
 /// [`SCHEMA_VERSION_KEY`] and in `dataset.toml`.
-pub const SCHEMA_VERSION: &str = "pairs/2";
+pub const SCHEMA_VERSION: &str = "pairs/3";
 
-/// The first version, still read (and written when a version-1 dataset is resumed).
+/// The earlier versions, still read (and written when a dataset of theirs is resumed).
 pub const SCHEMA_VERSION_1: &str = "pairs/1";
+pub const SCHEMA_VERSION_2: &str = "pairs/2";
+
+/// Every version this code reads, newest first.
+pub const PAIRS_VERSIONS: [&str; 3] = [SCHEMA_VERSION, SCHEMA_VERSION_2, SCHEMA_VERSION_1];
 
 /// The schema-metadata key holding a table's schema version (`"pairs/1"`, `"labels/1"`, ...).
 pub const SCHEMA_VERSION_KEY: &str = "schema_version";
@@ -63,8 +68,14 @@ pub fn list_of(t: DataType) -> DataType {
     DataType::List(Arc::new(Field::new(ITEM, t, false)))
 }
 
-/// The pairs v2 schema (built once, shared): what this code writes.
+/// The pairs v3 schema (built once, shared): what this code writes.
 pub fn pairs_schema() -> SchemaRef {
+    static SCHEMA: OnceLock<SchemaRef> = OnceLock::new();
+    SCHEMA.get_or_init(|| build_pairs_schema(3)).clone()
+}
+
+/// The pairs v2 schema: provenance without the scene.
+pub fn pairs_schema_v2() -> SchemaRef {
     static SCHEMA: OnceLock<SchemaRef> = OnceLock::new();
     SCHEMA.get_or_init(|| build_pairs_schema(2)).clone()
 }
@@ -75,11 +86,12 @@ pub fn pairs_schema_v1() -> SchemaRef {
     SCHEMA.get_or_init(|| build_pairs_schema(1)).clone()
 }
 
-/// The pairs schema of a recorded version (`pairs/1`, `pairs/2`), or `None` for a version this code
-/// does not know.
+/// The pairs schema of a recorded version (`pairs/1`, `pairs/2`, `pairs/3`), or `None` for a version
+/// this code does not know.
 pub fn pairs_schema_of(version: &str) -> Option<SchemaRef> {
     match version {
         SCHEMA_VERSION => Some(pairs_schema()),
+        SCHEMA_VERSION_2 => Some(pairs_schema_v2()),
         SCHEMA_VERSION_1 => Some(pairs_schema_v1()),
         _ => None,
     }
@@ -105,12 +117,19 @@ fn build_pairs_schema(version: u32) -> SchemaRef {
         col("source_intrinsics", f64_vector_type(4)),
         col("target_intrinsics", f64_vector_type(4)),
         col("t_target_from_source", f64_vector_type(16)),
-        col("pose_draws", u32t),
-        col("source_points", cloud_type()),
-        col("target_points", cloud_type()),
+        col("pose_draws", u32t.clone()),
     ];
+    if version >= 3 {
+        fields.push(col("scene_frames", u32t));
+    }
+    fields.extend([col("source_points", cloud_type()), col("target_points", cloud_type())]);
     if version >= 2 {
         fields.push(col("target_known_share", list_of(Float32)));
+    }
+    if version >= 3 {
+        fields.push(col("target_scene_share", list_of(Float32)));
+    }
+    if version >= 2 {
         fields.push(col("target_view", list_of(Int8)));
     }
     fields.extend([
@@ -125,7 +144,7 @@ fn build_pairs_schema(version: u32) -> SchemaRef {
         col("stages", Utf8),
         col("timings", timings_type()),
     ]);
-    let name = if version == 1 { SCHEMA_VERSION_1 } else { SCHEMA_VERSION };
+    let name = PAIRS_VERSIONS[3 - version as usize];
     let metadata = HashMap::from([(SCHEMA_VERSION_KEY.to_string(), name.to_string())]);
     Arc::new(Schema::new_with_metadata(fields, metadata))
 }
@@ -171,10 +190,12 @@ pub fn pairs_version_of(found: &Schema) -> std::result::Result<&'static str, Str
         }
     };
     match found.metadata().get(SCHEMA_VERSION_KEY).map(String::as_str) {
-        Some(SCHEMA_VERSION) => check(SCHEMA_VERSION),
-        Some(SCHEMA_VERSION_1) => check(SCHEMA_VERSION_1),
-        Some(other) => Err(format!("unknown pairs schema version {other:?} (this code reads {SCHEMA_VERSION_1} and {SCHEMA_VERSION})")),
-        None => check(SCHEMA_VERSION).or_else(|e| check(SCHEMA_VERSION_1).map_err(|_| e)),
+        Some(v) => match PAIRS_VERSIONS.iter().find(|k| **k == v) {
+            Some(known) => check(known),
+            None => Err(format!("unknown pairs schema version {v:?} (this code reads {})", PAIRS_VERSIONS.join(", "))),
+        },
+        // The newest version that fits; the error is the newest version's.
+        None => PAIRS_VERSIONS.iter().map(|v| check(v)).find(|r| r.is_ok()).unwrap_or_else(|| check(SCHEMA_VERSION)),
     }
 }
 
@@ -222,11 +243,14 @@ mod tests {
     #[test]
     fn schema_has_version_and_no_nullable_column() {
         let schema = pairs_schema();
-        assert_eq!(schema.metadata().get(SCHEMA_VERSION_KEY).map(String::as_str), Some("pairs/2"));
-        assert_eq!(schema.fields().len(), 30);
+        assert_eq!(schema.metadata().get(SCHEMA_VERSION_KEY).map(String::as_str), Some("pairs/3"));
+        assert_eq!(schema.fields().len(), 32);
         assert!(schema.fields().iter().all(|f| !f.is_nullable()));
         assert_eq!(schema.field(0).name(), "unit_index");
-        assert_eq!(schema.field(29).name(), "timings");
+        assert_eq!(schema.field(31).name(), "timings");
+        let v2 = pairs_schema_v2();
+        assert_eq!(v2.metadata().get(SCHEMA_VERSION_KEY).map(String::as_str), Some("pairs/2"));
+        assert_eq!(v2.fields().len(), 30);
         let v1 = pairs_schema_v1();
         assert_eq!(v1.metadata().get(SCHEMA_VERSION_KEY).map(String::as_str), Some("pairs/1"));
         assert_eq!(v1.fields().len(), 28);
@@ -258,6 +282,7 @@ mod tests {
         let schema = pairs_schema();
         assert_eq!(pairs_schema_mismatch(&schema), None);
         assert_eq!(pairs_schema_mismatch(&pairs_schema_v1()), None);
+        assert_eq!(pairs_schema_mismatch(&pairs_schema_v2()), None);
         let i = schema.index_of("overlap_source").unwrap();
         let mut fields: Vec<Field> = schema.fields().iter().map(|f| f.as_ref().clone()).collect();
         fields[i] = Field::new("overlap_source", DataType::Float32, false);

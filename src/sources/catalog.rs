@@ -139,15 +139,38 @@ pub struct CatalogFrame {
     /// Unique frame key.
     pub key: String,
     pub origin: FrameOrigin,
+    /// Its sequence (index into [`Catalog::sequences`]) and its position there (0 = the sequence's first
+    /// frame, selected or not).
+    pub sequence: usize,
+    pub position: usize,
+}
+
+/// Every frame of one sequence a catalog selects from, selected or not: the frames a scene around a
+/// source frame is fused from ([`crate::scene`]).
+#[derive(Clone, Debug)]
+pub struct CatalogSequence {
+    pub name: String,
+    /// All frames, by position.
+    pub frames: Vec<FrameOrigin>,
+    /// Positions of the first and last selected frames: a scene takes its frames within this span only, so
+    /// that a build restricted to some frames (a training split) never reads the frames around them.
+    pub span: (usize, usize),
+}
+
+impl FrameOrigin {
+    /// Whether the frame has a camera pose (synthetic frames always do).
+    pub fn has_pose(&self) -> bool {
+        match self {
+            FrameOrigin::Disk(f) => f.has_pose(),
+            FrameOrigin::Synthetic { .. } => true,
+        }
+    }
 }
 
 impl CatalogFrame {
     /// Whether the frame has a camera pose (synthetic frames always do).
     pub fn has_pose(&self) -> bool {
-        match &self.origin {
-            FrameOrigin::Disk(f) => f.has_pose(),
-            FrameOrigin::Synthetic { .. } => true,
-        }
+        self.origin.has_pose()
     }
 
     /// The depth file (or, for a synthetic frame, its key), for messages.
@@ -162,6 +185,8 @@ impl CatalogFrame {
 /// The selected frames of a build.
 pub struct Catalog {
     pub frames: Vec<CatalogFrame>,
+    /// The sequences the frames were selected from, every frame of each.
+    pub sequences: Vec<CatalogSequence>,
     pub samples_per_frame: u32,
     synthetic: SyntheticConfig,
     /// The last synthetic sequence generated (units arrive in frame order, so one is enough).
@@ -172,23 +197,32 @@ impl Catalog {
     /// Lists the frames of `source`, applying `select`; each frame makes `samples_per_frame` units.
     pub fn open(source: &SourceConfig, select: &SelectConfig, samples_per_frame: u32) -> Result<Catalog> {
         let mut frames = Vec::new();
+        let mut sequences = Vec::new();
+        // Selects from one sequence (its name, keys and origins by position).
+        let mut add = |name: String, keys: Vec<String>, origins: Vec<FrameOrigin>| {
+            let picked = select_indices(origins.len(), select);
+            if let (Some(&first), Some(&last)) = (picked.first(), picked.last()) {
+                for &i in &picked {
+                    let (key, origin) = (keys[i].clone(), origins[i].clone());
+                    frames.push(CatalogFrame { scene: name.clone(), key, origin, sequence: sequences.len(), position: i });
+                }
+                sequences.push(CatalogSequence { name, frames: origins, span: (first, last) });
+            }
+        };
         let synthetic = match source {
             SourceConfig::Synthetic { scenes, first_seed, synthetic } => {
                 for s in 0..*scenes as u64 {
                     let seed = first_seed + s;
                     let scene = format!("synthetic-{seed}");
-                    for index in select_indices(synthetic.frames, select) {
-                        frames.push(CatalogFrame { key: format!("{scene}/frame-{index:06}"), scene: scene.clone(), origin: FrameOrigin::Synthetic { seed, index } });
-                    }
+                    let keys = (0..synthetic.frames).map(|index| format!("{scene}/frame-{index:06}")).collect();
+                    add(scene, keys, (0..synthetic.frames).map(|index| FrameOrigin::Synthetic { seed, index }).collect());
                 }
                 synthetic.clone()
             }
             SourceConfig::Directory { path, .. } => {
                 for seq in open_sequences(path, source.open_options().expect("a directory source"))? {
-                    for i in select_indices(seq.frames.len(), select) {
-                        let f = &seq.frames[i];
-                        frames.push(CatalogFrame { scene: seq.name.clone(), key: f.key.clone(), origin: FrameOrigin::Disk(f.clone()) });
-                    }
+                    let keys = seq.frames.iter().map(|f| f.key.clone()).collect();
+                    add(seq.name, keys, seq.frames.into_iter().map(FrameOrigin::Disk).collect());
                 }
                 SyntheticConfig::default()
             }
@@ -196,7 +230,7 @@ impl Catalog {
         if frames.is_empty() {
             return Err(Error::config("select", "no frame is selected from the source"));
         }
-        Ok(Catalog { frames, samples_per_frame, synthetic, cache: Mutex::new(None) })
+        Ok(Catalog { frames, sequences, samples_per_frame, synthetic, cache: Mutex::new(None) })
     }
 
     /// Total number of work units.
@@ -211,7 +245,16 @@ impl Catalog {
 
     /// Decodes frame `i` (renders it, for synthetic frames).
     pub fn load(&self, i: usize) -> Result<Frame> {
-        match &self.frames[i].origin {
+        self.load_origin(&self.frames[i].origin)
+    }
+
+    /// Decodes the frame at `position` of sequence `sequence`, selected or not.
+    pub fn load_at(&self, sequence: usize, position: usize) -> Result<Frame> {
+        self.load_origin(&self.sequences[sequence].frames[position])
+    }
+
+    fn load_origin(&self, origin: &FrameOrigin) -> Result<Frame> {
+        match origin {
             FrameOrigin::Disk(f) => f.load(),
             FrameOrigin::Synthetic { seed, index } => {
                 let seq = {

@@ -6,6 +6,7 @@ use crate::correction::{apply_keep_mask, CorrectionConfig, Corrector};
 use crate::error::Result;
 use crate::geometry::DepthMap;
 use crate::runtime::Stage;
+use crate::scene::scene_keep_mask;
 use serde::{Deserialize, Serialize};
 
 /// The correction applied to the condition (before inpainting) and to the output (after).
@@ -19,7 +20,7 @@ pub struct CorrectConfig {
 impl Default for CorrectConfig {
     fn default() -> Self {
         let official = CorrectionConfig::OFFICIAL_MIN_POOL;
-        CorrectConfig { condition: official, output: official }
+        CorrectConfig { condition: official.clone(), output: official }
     }
 }
 
@@ -36,7 +37,12 @@ impl CorrectConfig {
             Target::Condition => &self.condition,
             Target::Output => &self.output,
         };
-        Correct { target, corrector: method.build() }
+        Correct { target, corrector: method.build(), scene_margin: method.scene_margin() }
+    }
+
+    /// Whether either correction is `scene`.
+    pub fn uses_scene(&self) -> bool {
+        self.condition.scene_margin().is_some() || self.output.scene_margin().is_some()
     }
 }
 
@@ -51,7 +57,10 @@ pub enum Target {
 
 pub struct Correct {
     pub target: Target,
+    /// The method's corrector (for `scene`, its fallback's).
     pub corrector: Box<dyn Corrector>,
+    /// For `scene`: the margin of the scene's rule, applied where the unit has a scene.
+    pub scene_margin: Option<f32>,
 }
 
 impl Stage<PairUnit> for Correct {
@@ -63,26 +72,38 @@ impl Stage<PairUnit> for Correct {
     }
 
     fn process(&mut self, unit: &mut PairUnit) -> Result<()> {
+        let scene = self.scene_margin.and_then(|m| unit.scene_depth.as_ref().map(|s| (s, m)));
         match self.target {
             Target::Condition => {
                 let depth = unit.condition.as_mut().expect("reproject sets the condition");
-                correct_condition(self.corrector.as_ref(), depth, &mut unit.known);
+                correct_condition(self.corrector.as_ref(), scene, depth, &mut unit.known);
             }
-            Target::Output => correct_output(self.corrector.as_ref(), unit.target_depth.as_mut().expect("inpaint sets the target")),
+            Target::Output => correct_output(self.corrector.as_ref(), scene, unit.target_depth.as_mut().expect("inpaint sets the target")),
         }
         Ok(())
     }
 }
 
-/// Drops the penetrating pixels of a re-projected condition: their depth becomes 0 and they turn unknown.
-pub fn correct_condition(corrector: &dyn Corrector, depth: &mut DepthMap, known: &mut [bool]) {
+/// The pixels of `depth` to keep: `corrector`'s mask, or, given a scene (its depth from the same camera
+/// and the rule's margin), the scene's decision where it has a surface ([`scene_keep_mask`]).
+pub fn keep_mask(corrector: &dyn Corrector, scene: Option<(&DepthMap, f32)>, depth: &DepthMap) -> Vec<bool> {
     let keep = corrector.keep_mask(depth);
+    match scene {
+        Some((scene, margin)) => scene_keep_mask(depth, scene, margin, &keep),
+        None => keep,
+    }
+}
+
+/// Drops the penetrating pixels of a re-projected condition ([`keep_mask`]): their depth becomes 0 and
+/// they turn unknown.
+pub fn correct_condition(corrector: &dyn Corrector, scene: Option<(&DepthMap, f32)>, depth: &mut DepthMap, known: &mut [bool]) {
+    let keep = keep_mask(corrector, scene, depth);
     apply_keep_mask(depth, known, &keep);
 }
 
-/// Drops the pixels of an inpainted output that the corrector rejects (their depth becomes 0).
-pub fn correct_output(corrector: &dyn Corrector, depth: &mut DepthMap) {
-    let keep = corrector.keep_mask(depth);
+/// Drops the pixels of an inpainted output that [`keep_mask`] rejects (their depth becomes 0).
+pub fn correct_output(corrector: &dyn Corrector, scene: Option<(&DepthMap, f32)>, depth: &mut DepthMap) {
+    let keep = keep_mask(corrector, scene, depth);
     let mut all = vec![true; keep.len()];
     apply_keep_mask(depth, &mut all, &keep);
 }

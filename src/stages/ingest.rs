@@ -10,6 +10,7 @@ use crate::geometry::{backproject, voxel_downsample, AxisBox, DepthMap, DepthRan
 use crate::runtime::Stage;
 use crate::shards::row::Status;
 use crate::sources::{Catalog, Frame};
+use nalgebra::Isometry3;
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
 
@@ -92,6 +93,7 @@ pub struct PreparedFrame {
     memory: Vec<Point>,
     /// `memory` voxel-downsampled: the pair's source cloud.
     source_points: Vec<Point>,
+    t_world_from_camera: Option<Isometry3<f64>>,
 }
 
 /// Decodes frames; bad input becomes an `input_error` unit (or a fatal error under `--strict`). The
@@ -114,7 +116,8 @@ impl Ingest {
             return Err(Error::input(&frame.depth_path, "depth map has no valid pixel inside the depth range and crop box"));
         }
         let source_points = voxel_downsample(&memory, self.voxel);
-        Ok(PreparedFrame { source_path: frame.depth_path.display().to_string(), source_hash: frame.content_hash, depth, k, memory, source_points })
+        let t_world_from_camera = frame.t_world_from_camera;
+        Ok(PreparedFrame { source_path: frame.depth_path.display().to_string(), source_hash: frame.content_hash, depth, k, memory, source_points, t_world_from_camera })
     }
 
     fn prepare(&self, unit: &mut PairUnit) -> Result<()> {
@@ -136,6 +139,7 @@ impl Ingest {
         unit.source_depth = Some(f.depth.clone());
         unit.memory = f.memory.clone();
         unit.source_points = f.source_points.clone();
+        unit.t_world_from_source = f.t_world_from_camera;
         Ok(())
     }
 }

@@ -1,13 +1,18 @@
-//! Inpaint: fill the unknown target pixels, keeping the known ones bit-exact.
+//! Inpaint: fill the unknown target pixels, keeping the known ones bit-exact; with `scene`, first from the
+//! unit's scene where it has a surface ([`paste_scene`]), then the rest by the fallback.
 
 use super::{streams, PairUnit};
 use crate::error::Result;
 use crate::inpainting::{InpaintContext, Inpainter};
 use crate::rng::Rng;
 use crate::runtime::Stage;
+use crate::scene::paste_scene;
 
 pub struct Inpaint {
+    /// The method's inpainter (for `scene`, its fallback's).
     pub inpainter: Box<dyn Inpainter>,
+    /// Whether the method is `scene`: units with a scene take its depth first.
+    pub scene: bool,
 }
 
 impl Stage<PairUnit> for Inpaint {
@@ -24,6 +29,18 @@ impl Stage<PairUnit> for Inpaint {
     }
 
     fn process_batch(&mut self, units: &mut [PairUnit]) -> Result<()> {
+        // The scene's pixels join the known ones: the fallback fills around them and keeps them bit for bit.
+        let mut pasted = Vec::new();
+        for u in units.iter_mut() {
+            if let (true, Some(scene)) = (self.scene, &u.scene_depth) {
+                let (depth, filled) = paste_scene(u.condition.as_ref().expect("reproject sets the condition"), &u.known, scene);
+                let known = u.known.iter().zip(&filled).map(|(k, f)| *k || *f).collect::<Vec<bool>>();
+                pasted.push(Some((depth, known)));
+                u.scene_filled = filled;
+            } else {
+                pasted.push(None);
+            }
+        }
         let contexts: Vec<InpaintContext> = units
             .iter()
             .map(|u| InpaintContext {
@@ -35,7 +52,11 @@ impl Stage<PairUnit> for Inpaint {
         let views: Vec<_> = units
             .iter()
             .zip(&contexts)
-            .map(|(u, ctx)| (u.condition.as_ref().expect("reproject sets the condition"), u.known.as_slice(), ctx))
+            .zip(&pasted)
+            .map(|((u, ctx), p)| match p {
+                Some((depth, known)) => (depth, known.as_slice(), ctx),
+                None => (u.condition.as_ref().expect("reproject sets the condition"), u.known.as_slice(), ctx),
+            })
             .collect();
         let filled = self.inpainter.inpaint_batch(&views);
         for (unit, depth) in units.iter_mut().zip(filled) {

@@ -1,8 +1,9 @@
 //! The build pipeline's operators, one file each: thin adapters from the pure functions of
 //! `geometry`, `correction` and `inpainting` to the runtime's [`Stage`](crate::runtime::Stage) trait.
 //!
-//! ingest (with the frame cache its workers share) → pose → reproject → correct(condition) → inpaint → correct(output) → [successive] → voxelize →
-//! validate → pack → sink (successive only when a pair has several target views)
+//! ingest (with the frame cache its workers share) → pose → reproject → [scene] → correct(condition) → inpaint → correct(output) →
+//! [successive] → voxelize → validate → pack → sink (scene only when a method is `scene`, successive only
+//! when a pair has several target views)
 
 pub mod correct;
 pub mod frame_cache;
@@ -11,6 +12,7 @@ pub mod inpaint;
 pub mod pack;
 pub mod pose;
 pub mod reproject;
+pub mod scene;
 pub mod sink;
 pub mod successive;
 pub mod unit;

@@ -103,9 +103,11 @@ impl Stage<PairUnit> for Pack {
             target_intrinsics: k,
             t_target_from_source: pose_to_rows(&u.t_target_from_source),
             pose_draws: u.pose_draws,
+            scene_frames: u.scene_frames,
             source_points: std::mem::take(&mut u.source_points),
             target_points: std::mem::take(&mut u.target_points),
             target_known_share: u.target_tags.iter().map(|t| t.known).collect(),
+            target_scene_share: u.target_tags.iter().map(|t| t.scene).collect(),
             target_view: std::mem::take(&mut u.target_tags).iter().map(|t| t.view).collect(),
             overlap_source: u.overlap.source,
             overlap_target: u.overlap.target,
@@ -122,6 +124,8 @@ impl Stage<PairUnit> for Pack {
         u.condition = None;
         u.target_depth = None;
         u.known = Vec::new();
+        u.scene_depth = None;
+        u.scene_filled = Vec::new();
         Ok(())
     }
 }

@@ -141,7 +141,7 @@ impl OverlapEstimate {
     pub fn of(&self, probes: &[Point], memory: &[Point], pose: &Isometry3<f64>, k: &Intrinsics) -> f64 {
         let proj = project_zbuffer(memory, pose, k, false);
         let (mut view, mut known) = (proj.depth, proj.known);
-        correct_condition(self.condition.as_ref(), &mut view, &mut known);
+        correct_condition(self.condition.as_ref(), None, &mut view, &mut known);
         view_overlap(probes, &view, pose, k, self.range, &self.crop_box, self.voxel, self.radius)
     }
 }

@@ -96,7 +96,7 @@ impl Stage<PairUnit> for Successive {
         // point tagged with its provenance: in the memory, `known` is the share of a point's voxel traced
         // back to the source frame. The unit's own memory stays the source cloud.
         let (mut fragment, mut fragment_tags) = self.view_points(first, &k, &t_first, &unit.known, 0);
-        let source_tags = vec![PointTag { known: 1.0, view: 0 }; unit.memory.len()];
+        let source_tags = vec![PointTag { known: 1.0, scene: 0.0, view: 0 }; unit.memory.len()];
         let (mut memory, mut memory_tags) = voxel_downsample_tagged(
             &[unit.memory.as_slice(), &fragment].concat(),
             &[source_tags.as_slice(), &fragment_tags].concat(),
@@ -128,9 +128,9 @@ impl Successive {
     /// correction, and won by a memory point whose voxel is mostly source-traced).
     fn generate(&self, memory: &[Point], memory_tags: &[PointTag], t: &Isometry3<f64>, k: &Intrinsics, seed: u64) -> (DepthMap, Vec<bool>) {
         let Projection { depth: mut condition, mut known, source_index } = project_zbuffer(memory, t, k, true);
-        correct_condition(self.condition.as_ref(), &mut condition, &mut known);
+        correct_condition(self.condition.as_ref(), None, &mut condition, &mut known);
         let mut depth = self.inpainter.inpaint(&condition, &known, &InpaintContext { intrinsics: *k, seed, t_target_from_source: *t });
-        correct_output(self.output.as_ref(), &mut depth);
+        correct_output(self.output.as_ref(), None, &mut depth);
         let winners = source_index.expect("asked for the source index");
         let traced = known.iter().zip(&winners).map(|(&kn, &i)| kn && i != NO_SOURCE && memory_tags[i as usize].known >= 0.5).collect();
         (depth, traced)
@@ -139,7 +139,7 @@ impl Successive {
     /// A view's points (depth range applied) moved into the source camera frame, tagged with `view` and
     /// whether their pixel is `known`.
     fn view_points(&self, depth: &DepthMap, k: &Intrinsics, t_view_from_source: &Isometry3<f64>, known: &[bool], view: u8) -> (Vec<Point>, Vec<PointTag>) {
-        let (points, tags) = tagged_view_points(depth, k, self.depth_range, known, view);
+        let (points, tags) = tagged_view_points(depth, k, self.depth_range, known, &[], view);
         (transform_points(&points, &t_view_from_source.inverse()), tags)
     }
 }

@@ -27,11 +27,20 @@ pub struct PairUnit {
     pub source_depth: Option<DepthMap>,
     /// Source points in the crop box, full resolution (the "scene memory"), source camera frame.
     pub memory: Vec<Point>,
+    /// The source frame's camera-to-world pose, when its sequence has one.
+    pub t_world_from_source: Option<Isometry3<f64>>,
     pub t_target_from_source: Isometry3<f64>,
     pub pose_draws: u32,
     /// Re-projected condition (after correction) and its known-pixel mask.
     pub condition: Option<DepthMap>,
     pub known: Vec<bool>,
+    /// With a `scene` method: the scene (the fused frames around the source frame) seen from the target
+    /// camera, 0 where it has no surface; `None` on the single-map path (no pose, no scene method).
+    pub scene_depth: Option<DepthMap>,
+    /// Frames fused into the unit's scene (0: the single-map path).
+    pub scene_frames: u32,
+    /// Target pixels the scene filled (empty when it filled none).
+    pub scene_filled: Vec<bool>,
     /// Final target depth (inpainted, corrected); with successive views, the first view's.
     pub target_depth: Option<DepthMap>,
     /// With successive views: all views fused, in the first view's camera frame, cropped to the box, with
@@ -65,10 +74,14 @@ impl PairUnit {
             k: None,
             source_depth: None,
             memory: Vec::new(),
+            t_world_from_source: None,
             t_target_from_source: Isometry3::identity(),
             pose_draws: 0,
             condition: None,
             known: Vec::new(),
+            scene_depth: None,
+            scene_frames: 0,
+            scene_filled: Vec::new(),
             target_depth: None,
             fused_target: None,
             source_points: Vec::new(),

@@ -58,7 +58,7 @@ impl Stage<PairUnit> for Voxelize {
         let (target_points, tags) = match unit.fused_target.take() {
             Some(fused) => fused,
             None => {
-                let (points, tags) = tagged_view_points(target, &k, self.depth_range, &unit.known, 0);
+                let (points, tags) = tagged_view_points(target, &k, self.depth_range, &unit.known, &unit.scene_filled, 0);
                 self.crop_box.crop_with(&points, &tags)
             }
         };
@@ -75,9 +75,11 @@ impl Stage<PairUnit> for Voxelize {
 }
 
 /// The points of a target view's depth map (in its camera frame, within `range`), each tagged with view
-/// `view` and as re-projected (`known` 1) where `known` marks its pixel, filled (0) elsewhere.
-pub fn tagged_view_points(depth: &DepthMap, k: &Intrinsics, range: DepthRange, known: &[bool], view: u8) -> (Vec<Point>, Vec<PointTag>) {
+/// `view`: re-projected (`known` 1) where `known` marks its pixel, seen by the scene (`scene` 1) where
+/// `scene` does (empty: nowhere), made up by a fill (both 0) elsewhere.
+pub fn tagged_view_points(depth: &DepthMap, k: &Intrinsics, range: DepthRange, known: &[bool], scene: &[bool], view: u8) -> (Vec<Point>, Vec<PointTag>) {
     let (points, pixels) = backproject_with_pixels(depth, k, range);
-    let tags = pixels.iter().map(|&p| PointTag { known: known.get(p as usize).copied().unwrap_or(false) as u8 as f32, view }).collect();
+    let flag = |mask: &[bool], p: u32| mask.get(p as usize).copied().unwrap_or(false) as u8 as f32;
+    let tags = pixels.iter().map(|&p| PointTag { known: flag(known, p), scene: flag(scene, p), view }).collect();
     (points, tags)
 }

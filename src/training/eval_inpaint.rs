@@ -3,13 +3,19 @@
 //!
 //! The scores are [`crate::training::fill_metrics`]'s; [`dump_views`] writes the views as `.npy` files so
 //! an outside fill (`benchmarks/peers/fill_peers.py`) is scored on exactly the same pixels.
+//!
+//! With a scene ([`scene_of_view`]), the `scene` correction and fills see the frames around the source
+//! fused and ray-cast at the target pose, with the held-out rule: the captured target frame and its
+//! neighbours never enter the scene ([`crate::scene::HeldOut`]).
 
 use crate::correction::{apply_keep_mask, Corrector};
 use crate::error::{Error, Result};
 use crate::geometry::{backproject, project_zbuffer, DepthMap, Intrinsics};
 use crate::inpainting::{InpaintContext, Inpainter};
+use crate::scene::{block_of, fuse_scene, paste_scene, window_frames, HeldOut, SceneConfig};
+use crate::stages::correct::keep_mask;
 use crate::stages::ingest::WorkingConfig;
-use crate::sources::Frame;
+use crate::sources::{Frame, Sequence};
 pub use crate::training::fill_metrics::FillScores;
 use nalgebra::Isometry3;
 use std::path::Path;
@@ -26,6 +32,8 @@ pub struct View {
     pub seed: u64,
     /// The target camera from the source camera (the stored poses).
     pub t_target_from_source: Isometry3<f64>,
+    /// The scene seen from the target camera (0 where it has no surface), when scenes are evaluated.
+    pub scene: Option<DepthMap>,
 }
 
 /// The view of `source` seen from `target`'s stored pose (both frames need poses).
@@ -37,7 +45,19 @@ pub fn make_view(source: &Frame, target: &Frame, working: &WorkingConfig, seed: 
     let memory = working.crop_box.crop(&backproject(&depth, &k, working.depth_range()));
     let proj = project_zbuffer(&memory, &t, &k, false);
     let key = format!("{} -> {}", source.key, target.key);
-    Ok(View { key, condition: proj.depth, known: proj.known, captured, intrinsics: k, seed, t_target_from_source: t })
+    Ok(View { key, condition: proj.depth, known: proj.known, captured, intrinsics: k, seed, t_target_from_source: t, scene: None })
+}
+
+/// The scene of the view of `seq`'s frame `source` seen from frame `target` (working intrinsics `k`): the
+/// frames of the source's block window ([`window_frames`], the whole sequence as span), with `target` and
+/// the `exclude` frames on each side of it held out, fused and ray-cast at the target's stored pose. Also
+/// returns the positions fused.
+pub fn scene_of_view(seq: &Sequence, source: usize, target: usize, exclude: usize, config: &SceneConfig, k: &Intrinsics) -> Result<(DepthMap, Vec<usize>)> {
+    let held_out = HeldOut { position: target, radius: exclude };
+    let frames = window_frames(config, block_of(source, config), (0, seq.frames.len() - 1), |p| seq.frames[p].has_pose(), &[held_out]);
+    let scene = fuse_scene(&frames, |p| seq.frames[p].load(), &config.tsdf)?;
+    let t_world_from_target = seq.frames[target].load()?.t_world_from_camera.ok_or_else(|| Error::input(&seq.frames[target].depth_path, "frame has no camera pose"))?;
+    Ok((scene.depth_at(k, &t_world_from_target)?, frames.positions().to_vec()))
 }
 
 /// One row of the comparison.
@@ -50,13 +70,54 @@ pub struct MethodRow {
 /// A correction method under evaluation.
 pub struct NamedCorrector {
     pub name: String,
+    /// The method's corrector (for `scene`, its fallback's).
     pub corrector: Box<dyn Corrector>,
+    /// For `scene`: the margin of the scene's rule, applied where the view has a scene.
+    pub scene_margin: Option<f32>,
+}
+
+impl NamedCorrector {
+    /// `config` under `name` (the scene's margin when it is `scene`).
+    pub fn new(name: impl Into<String>, config: &crate::correction::CorrectionConfig) -> Self {
+        NamedCorrector { name: name.into(), corrector: config.build(), scene_margin: config.scene_margin() }
+    }
+
+    /// A view's condition and known mask after this correction.
+    fn apply(&self, v: &View) -> (DepthMap, Vec<bool>) {
+        let (mut condition, mut known) = (v.condition.clone(), v.known.clone());
+        let scene = self.scene_margin.and_then(|m| v.scene.as_ref().map(|s| (s, m)));
+        let keep = keep_mask(self.corrector.as_ref(), scene, &condition);
+        apply_keep_mask(&mut condition, &mut known, &keep);
+        (condition, known)
+    }
 }
 
 /// A fill method under evaluation.
 pub struct NamedFill {
     pub name: String,
+    /// The method's inpainter (for `scene`, its fallback's).
     pub inpainter: Box<dyn Inpainter>,
+    /// Whether the method is `scene`: the view's scene fills first, the inpainter the rest.
+    pub scene: bool,
+}
+
+impl NamedFill {
+    /// `config` under `name`.
+    pub fn new(name: impl Into<String>, config: &crate::inpainting::InpaintConfig) -> Result<Self> {
+        Ok(NamedFill { name: name.into(), inpainter: config.build()?, scene: config.is_scene() })
+    }
+
+    /// The filled view and the mask of the pixels the scene gave (empty without a scene).
+    fn fill(&self, condition: &DepthMap, known: &[bool], scene: Option<&DepthMap>, ctx: &InpaintContext) -> (DepthMap, Vec<bool>) {
+        match (self.scene, scene) {
+            (true, Some(scene)) => {
+                let (pasted, from_scene) = paste_scene(condition, known, scene);
+                let with_scene: Vec<bool> = known.iter().zip(&from_scene).map(|(k, s)| *k || *s).collect();
+                (self.inpainter.inpaint(&pasted, &with_scene, ctx), from_scene)
+            }
+            _ => (self.inpainter.inpaint(condition, known, ctx), Vec::new()),
+        }
+    }
 }
 
 /// Scores every (correction, fill) pair over `views`; `on_view` is called after each view. With `dump`,
@@ -77,16 +138,15 @@ pub fn evaluate(
         .collect();
     for (i, v) in views.iter().enumerate() {
         for (ci, c) in corrections.iter().enumerate() {
-            let (mut condition, mut known) = (v.condition.clone(), v.known.clone());
-            let keep = c.corrector.keep_mask(&condition);
-            apply_keep_mask(&mut condition, &mut known, &keep);
+            let (condition, known) = c.apply(v);
             let ctx = InpaintContext { intrinsics: v.intrinsics, seed: v.seed, t_target_from_source: v.t_target_from_source };
             for (fi, f) in fills.iter().enumerate() {
                 let clock = Instant::now();
-                let out = f.inpainter.inpaint(&condition, &known, &ctx);
+                let (out, from_scene) = f.fill(&condition, &known, v.scene.as_ref(), &ctx);
                 let scores = &mut rows[ci * fills.len() + fi].scores;
                 scores.fill_ns += clock.elapsed().as_nanos();
                 scores.add(&known, &out, &v.captured, &v.intrinsics, range);
+                scores.scene_pixels += from_scene.iter().filter(|s| **s).count() as u64;
                 if let (Some(dir), false) = (dump, f.name == "none") {
                     let path = dir.join(&c.name).join(format!("{i:03}_fill_{}.npy", f.name.replace('/', "-")));
                     let (w, h) = (out.width() as usize, out.height() as usize);
@@ -102,17 +162,18 @@ pub fn evaluate(
 /// The rows as an aligned table.
 pub fn format_table(rows: &[MethodRow]) -> String {
     let mut s = format!(
-        "{:<10} {:<16} {:>5} {:>8} {:>8} {:>9} {:>8} {:>7} {:>7} {:>8} {:>7} {:>7} {:>7} {:>8} {:>8}\n",
-        "correction", "fill", "views", "unknown", "wrong/m", "coverage", "AbsRel", "RMSE m", "d<1.25", "edge AR", "edge RM", "edge d", "flying", "cloud cm", "ms/view"
+        "{:<10} {:<16} {:>5} {:>8} {:>7} {:>8} {:>9} {:>8} {:>7} {:>7} {:>8} {:>7} {:>7} {:>7} {:>8} {:>8}\n",
+        "correction", "fill", "views", "unknown", "scene", "wrong/m", "coverage", "AbsRel", "RMSE m", "d<1.25", "edge AR", "edge RM", "edge d", "flying", "cloud cm", "ms/view"
     );
     for r in rows {
         let c = &r.scores;
         s += &format!(
-            "{:<10} {:<16} {:>5} {:>7.1}% {:>8.1} {:>8.1}% {:>8.4} {:>7.3} {:>6.1}% {:>8.4} {:>7.3} {:>6.1}% {:>6.1}% {:>8.2} {:>8.1}\n",
+            "{:<10} {:<16} {:>5} {:>7.1}% {:>6.1}% {:>8.1} {:>8.1}% {:>8.4} {:>7.3} {:>6.1}% {:>8.4} {:>7.3} {:>6.1}% {:>6.1}% {:>8.2} {:>8.1}\n",
             r.correction,
             r.fill,
             c.views,
             100.0 * c.unknown_share(),
+            100.0 * c.scene_share(),
             c.wrong_kept_per_view(),
             100.0 * c.coverage(),
             c.filled.abs_rel(),
@@ -132,17 +193,18 @@ pub fn format_table(rows: &[MethodRow]) -> String {
 /// The rows as CSV.
 pub fn to_csv(rows: &[MethodRow]) -> String {
     let mut s = String::from(
-        "correction,fill,views,unknown_share,kept_per_map,wrong_kept_per_map,kept_abs_rel,fill_coverage,fill_abs_rel,fill_rmse_m,\
+        "correction,fill,views,unknown_share,scene_share,kept_per_map,wrong_kept_per_map,kept_abs_rel,fill_coverage,fill_abs_rel,fill_rmse_m,\
          fill_delta_1_25,edge_abs_rel,edge_rmse_m,edge_delta_1_25,flying_share,cloud_distance_m,ms_per_view\n",
     );
     for r in rows {
         let c = &r.scores;
         s += &format!(
-            "{},{},{},{:.6},{:.3},{:.3},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.3}\n",
+            "{},{},{},{:.6},{:.6},{:.3},{:.3},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.3}\n",
             r.correction,
             r.fill,
             c.views,
             c.unknown_share(),
+            c.scene_share(),
             c.kept_per_view(),
             c.wrong_kept_per_view(),
             c.kept_abs_rel(),
@@ -164,7 +226,9 @@ pub fn to_csv(rows: &[MethodRow]) -> String {
 /// Writes every view as seen after each correction, for outside fills: `DIR/<correction>/NNN_condition.npy`
 /// (float32 metres, 0 where unknown), `NNN_known.npy` (bool) and `NNN_captured.npy` (float32 metres), all
 /// (H, W), and `DIR/<correction>/views.json` with each view's key, intrinsics, target-from-source pose
-/// (row-major 4×4) and the valid depth range.
+/// (row-major 4×4) and the valid depth range. Views with a scene also get `NNN_scene.npy` (float32 metres,
+/// the scene's depth at the unknown pixels where it has a surface, 0 elsewhere): an outside fill then runs
+/// as the `scene` fill's fallback (`fill_peers.py` scores both).
 pub fn dump_views(dir: &Path, views: &[View], corrections: &[NamedCorrector], range: (f32, f32)) -> Result<()> {
     use crate::export::npy::{encode_npy_image_f32, encode_npy_mask};
     for c in corrections {
@@ -172,9 +236,7 @@ pub fn dump_views(dir: &Path, views: &[View], corrections: &[NamedCorrector], ra
         std::fs::create_dir_all(&sub).map_err(|e| Error::io(&sub, e))?;
         let mut index = Vec::new();
         for (i, v) in views.iter().enumerate() {
-            let (mut condition, mut known) = (v.condition.clone(), v.known.clone());
-            let keep = c.corrector.keep_mask(&condition);
-            apply_keep_mask(&mut condition, &mut known, &keep);
+            let (condition, known) = c.apply(v);
             let (w, h) = (v.condition.width() as usize, v.condition.height() as usize);
             let write = |name: &str, bytes: Vec<u8>| {
                 let path = sub.join(format!("{i:03}_{name}.npy"));
@@ -184,6 +246,11 @@ pub fn dump_views(dir: &Path, views: &[View], corrections: &[NamedCorrector], ra
             write("condition", encode_npy_image_f32(w, h, &masked))?;
             write("known", encode_npy_mask(w, h, &known))?;
             write("captured", encode_npy_image_f32(w, h, v.captured.data()))?;
+            if let Some(scene) = &v.scene {
+                let (pasted, from_scene) = paste_scene(&condition, &known, scene);
+                let at_unknown: Vec<f32> = pasted.data().iter().zip(&from_scene).map(|(z, s)| if *s { *z } else { 0.0 }).collect();
+                write("scene", encode_npy_image_f32(w, h, &at_unknown))?;
+            }
             let k = &v.intrinsics;
             index.push(serde_json::json!({
                 "index": i, "key": v.key, "width": w, "height": h,

@@ -74,6 +74,8 @@ pub struct FillScores {
     cloud_m: f64,
     /// Time spent in the fill, nanoseconds.
     pub fill_ns: u128,
+    /// Pixels a `scene` fill took from the scene (of all view pixels).
+    pub scene_pixels: u64,
 }
 
 impl FillScores {
@@ -131,6 +133,11 @@ impl FillScores {
     pub fn kept_abs_rel(&self) -> f64 {
         self.kept_abs_rel / self.kept.max(1) as f64
     }
+    /// Share of all view pixels the scene filled (0 for fills without a scene).
+    pub fn scene_share(&self) -> f64 {
+        self.scene_pixels as f64 / self.pixels.max(1) as f64
+    }
+
     pub fn unknown_share(&self) -> f64 {
         self.unknown_all as f64 / self.pixels.max(1) as f64
     }

@@ -8,8 +8,10 @@
 //!   training frames, up to `--pairs` of them), `fragN` (N of the fragment pairs: the scarce-real case);
 //! - generated pairs: `reproj` (re-projection only: no correction, no fill), `classical` (min-pool +
 //!   the fill of the classical config), `nofill` (min-pool, holes left empty), `neural` (U-Net correction
-//!   + the hole-aware diffusion refiner), each optionally `-lo` (poses drawn for a 3DLoMatch + 3DMatch
-//!   overlap mix through `[pose.target]`).
+//!   + the hole-aware diffusion refiner), `scene` (for posed sequences: corrected and filled from the
+//!   scene fused from the training frames around each source frame, min-pool and no fill where the scene
+//!   saw nothing), each optionally `-lo` (poses drawn for a 3DLoMatch + 3DMatch overlap mix through
+//!   `[pose.target]`).
 //!
 //! Counts: when the first component is real, it is the base: n of its pairs are drawn, the base keeps
 //! ⌈f·n⌉ of them and every other component ⌊f·n⌋ (its pool permitting). Without a real component, each
@@ -30,6 +32,7 @@ pub enum GeneratorKind {
     Classical,
     NoFill,
     Neural,
+    Scene,
 }
 
 /// A generator pipeline a condition draws pairs from.
@@ -52,6 +55,7 @@ impl Generator {
             GeneratorKind::Classical => "classical",
             GeneratorKind::NoFill => "nofill",
             GeneratorKind::Neural => "neural",
+            GeneratorKind::Scene => "scene",
         };
         if self.lo {
             format!("{base}-lo")
@@ -70,6 +74,7 @@ impl Generator {
             "classical" => GeneratorKind::Classical,
             "nofill" => GeneratorKind::NoFill,
             "neural" => GeneratorKind::Neural,
+            "scene" => GeneratorKind::Scene,
             _ => return None,
         };
         Some(Generator { kind, lo })
@@ -93,6 +98,11 @@ impl Generator {
                     q(&models.join("diffusion-tiny-holes.safetensors"))
                 );
                 vec![("correct.condition".into(), unet.clone()), ("correct.output".into(), unet), ("inpaint".into(), diffusion)]
+            }
+            GeneratorKind::Scene => {
+                let correct = r#"{ method = "scene", margin = 0.05, fallback = { method = "min_pool", threshold = 0.0375 } }"#.to_string();
+                let fill = r#"{ method = "scene", fallback = { method = "none" } }"#.to_string();
+                vec![("correct.condition".into(), correct.clone()), ("correct.output".into(), correct), ("inpaint".into(), fill)]
             }
         };
         if self.lo {
@@ -186,7 +196,7 @@ impl Condition {
                 s if s.starts_with("frag") && s[4..].parse::<usize>().is_ok_and(|n| n > 0) => Source::Real(Real::Fragments(Some(s[4..].parse().unwrap()))),
                 s => Source::Generated(Generator::parse(s).ok_or_else(|| {
                     bad(format!(
-                        "unknown component `{s}` (fpfh alone; single, frag, fragN; reproj, classical, nofill, neural, each with -lo; \
+                        "unknown component `{s}` (fpfh alone; single, frag, fragN; reproj, classical, nofill, neural, scene, each with -lo; \
                          or an alias {})",
                         aliases().join(", ")
                     ))

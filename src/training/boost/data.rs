@@ -53,7 +53,7 @@ fn truth_pairs(seq: &Sequence, clouds: &[Cloud], truths: Vec<PairTruth>, tag: &s
                 key: format!("{}{tag}/{}/{}", seq.name, t.gt.i, t.gt.j),
                 source: cloud(t.gt.j).clone(),
                 target: cloud(t.gt.i).clone(),
-                target_known: Vec::new(),
+                target_observed: Vec::new(),
                 real: true,
                 t_target_from_source: t.gt.t_i_from_j,
             },

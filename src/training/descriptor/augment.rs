@@ -33,7 +33,7 @@ impl Augment {
             key: pair.key.clone(),
             source,
             target,
-            target_known: pair.target_known.clone(),
+            target_observed: pair.target_observed.clone(),
             real: pair.real,
             t_target_from_source: rt * pair.t_target_from_source * rs.inverse(),
         }
@@ -72,15 +72,16 @@ impl Augment {
     }
 }
 
-/// `pair` without its filled target points (those whose known share is below [`KNOWN_MIN_SHARE`]), so
-/// they appear in no local frame, patch or feature; a pair without provenance is unchanged.
+/// `pair` without its made-up target points (those whose observed share, re-projected or seen by the scene,
+/// is below [`KNOWN_MIN_SHARE`]), so they appear in no local frame, patch or feature; a pair without
+/// provenance is unchanged.
 pub fn drop_filled(pair: &TrainPair) -> TrainPair {
-    if pair.target_known.len() != pair.target.len() {
+    if pair.target_observed.len() != pair.target.len() {
         return pair.clone();
     }
-    let (target, target_known) =
-        pair.target.iter().zip(&pair.target_known).filter(|(_, &s)| s >= KNOWN_MIN_SHARE).map(|(p, s)| (*p, *s)).unzip();
-    TrainPair { target, target_known, ..pair.clone() }
+    let (target, target_observed) =
+        pair.target.iter().zip(&pair.target_observed).filter(|(_, &s)| s >= KNOWN_MIN_SHARE).map(|(p, s)| (*p, *s)).unzip();
+    TrainPair { target, target_observed, ..pair.clone() }
 }
 
 #[cfg(test)]
@@ -92,8 +93,8 @@ mod tests {
         let source: Vec<Point> = (0..4000).map(|_| Point::new(rng.uniform() as f32, rng.uniform() as f32, 1.0 + rng.uniform() as f32)).collect();
         let t = Isometry3::from_parts(Translation3::new(0.1, 0.0, -0.2), UnitQuaternion::from_euler_angles(0.2, -0.1, 0.3));
         let target: Vec<Point> = source.iter().map(|p| t.cast::<f32>() * p).collect();
-        let target_known = (0..target.len()).map(|i| if i % 4 == 0 { 0.0 } else { 1.0 }).collect();
-        TrainPair { key: "k".into(), source, target, target_known, real: false, t_target_from_source: t }
+        let target_observed = (0..target.len()).map(|i| if i % 4 == 0 { 0.0 } else { 1.0 }).collect();
+        TrainPair { key: "k".into(), source, target, target_observed, real: false, t_target_from_source: t }
     }
 
     #[test]
@@ -125,10 +126,10 @@ mod tests {
     #[test]
     fn dropping_filled_points() {
         let p = pair();
-        let real = TrainPair { target_known: Vec::new(), real: true, ..p.clone() };
+        let real = TrainPair { target_observed: Vec::new(), real: true, ..p.clone() };
         let d = drop_filled(&p);
         assert_eq!(d.target.len(), 3000);
-        assert!(d.target_known.iter().all(|&s| s >= KNOWN_MIN_SHARE));
+        assert!(d.target_observed.iter().all(|&s| s >= KNOWN_MIN_SHARE));
         assert_eq!(drop_filled(&real).target.len(), 4000);
     }
 }

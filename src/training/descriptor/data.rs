@@ -23,9 +23,10 @@ pub struct TrainPair {
     pub key: String,
     pub source: Vec<Point>,
     pub target: Vec<Point>,
-    /// Per target point of a generated pair: the share of its voxel re-projected from the source frame
-    /// (`target_known_share`); empty for real pairs and for datasets without provenance.
-    pub target_known: Vec<f32>,
+    /// Per target point of a generated pair: the share of its voxel a sensor saw, re-projected from the
+    /// source frame or seen by the scene (`target_known_share + target_scene_share`; the rest a fill made
+    /// up); empty for real pairs and for datasets without provenance.
+    pub target_observed: Vec<f32>,
     /// A real pair (captured depth and poses) rather than a generated one.
     pub real: bool,
     pub t_target_from_source: Isometry3<f64>,
@@ -35,7 +36,11 @@ impl TrainPair {
     /// A generated pair from an `ok` row of a pair dataset.
     pub fn from_row(r: crate::shards::PairRow) -> std::result::Result<TrainPair, String> {
         let t = pose_from_rows(&r.t_target_from_source).map_err(|e| format!("pair {}: t_target_from_source: {e}", r.pair_key))?;
-        Ok(TrainPair { key: r.pair_key, source: r.source_points, target: r.target_points, target_known: r.target_known_share, real: false, t_target_from_source: t })
+        let observed = match r.target_scene_share.len() == r.target_known_share.len() {
+            true => r.target_known_share.iter().zip(&r.target_scene_share).map(|(k, s)| k + s).collect(),
+            false => r.target_known_share,
+        };
+        Ok(TrainPair { key: r.pair_key, source: r.source_points, target: r.target_points, target_observed: observed, real: false, t_target_from_source: t })
     }
 }
 
@@ -78,14 +83,14 @@ pub fn limit_generated(pairs: Vec<TrainPair>, ratio: f64, seed: u64) -> Result<V
     Ok(pairs.into_iter().enumerate().filter(|(i, p)| p.real || picked.remove(i)).map(|(_, p)| p).collect())
 }
 
-/// A target point of a generated pair counts as re-projected (known) when at least this share of its
-/// voxel's points were (`target_known_share`), filled otherwise.
+/// A target point of a generated pair counts as observed (re-projected or seen by the scene) when at least
+/// this share of its voxel's points were, made up by a fill otherwise.
 pub const KNOWN_MIN_SHARE: f32 = 0.5;
 
 /// Whether target point `k` of `pair` may be a positive under `known_only`: every point of a real pair,
-/// and the re-projected ones of a generated pair.
+/// and the observed ones (re-projected or seen by the scene) of a generated pair.
 pub fn may_be_positive(pair: &TrainPair, k: usize, known_only: bool) -> bool {
-    !known_only || pair.target_known.get(k).is_none_or(|&s| s >= KNOWN_MIN_SHARE)
+    !known_only || pair.target_observed.get(k).is_none_or(|&s| s >= KNOWN_MIN_SHARE)
 }
 
 /// The pairs of the benchmark folder `root`: source = cloud j, target = cloud i, pose = gt.log's
@@ -105,7 +110,7 @@ fn bench_pairs(root: &Path) -> Result<Vec<TrainPair>> {
         for p in &bench.pairs {
             let (source, target) = (cloud(&p.source_path)?, cloud(&p.target_path)?);
             let key = format!("{}/{}/{}/{}", bench.name, p.scene, p.i, p.j);
-            out.push(TrainPair { key, source: source.to_vec(), target: target.to_vec(), target_known: Vec::new(), real: true, t_target_from_source: p.t_i_from_j });
+            out.push(TrainPair { key, source: source.to_vec(), target: target.to_vec(), target_observed: Vec::new(), real: true, t_target_from_source: p.t_i_from_j });
         }
     }
     if out.is_empty() {
@@ -149,7 +154,7 @@ mod tests {
         let t = Isometry3::from_parts(Translation3::new(0.1, -0.2, 0.3), UnitQuaternion::from_euler_angles(0.1, 0.2, -0.3));
         // The target holds the moved source points whose x < 0.5 (half the overlap), jittered by 1 mm.
         let target: Vec<Point> = source.iter().filter(|p| p.x < 0.5).map(|p| t.cast::<f32>() * p + nalgebra::Vector3::new(0.001, 0.0, 0.0)).collect();
-        let pair = TrainPair { key: "k".into(), source, target, target_known: Vec::new(), real: true, t_target_from_source: t };
+        let pair = TrainPair { key: "k".into(), source, target, target_observed: Vec::new(), real: true, t_target_from_source: t };
         let index = RadiusIndex::new(&pair.target, 0.0375);
         let c = correspondences(&pair, &index, 100, false, &mut rng);
         assert_eq!(c.len(), 100);
@@ -162,21 +167,21 @@ mod tests {
 
     #[test]
     fn known_only_positives_never_land_on_filled_points() {
-        let real_point = TrainPair { key: "r".into(), source: vec![], target: vec![Point::origin()], target_known: vec![], real: true, t_target_from_source: Isometry3::identity() };
+        let real_point = TrainPair { key: "r".into(), source: vec![], target: vec![Point::origin()], target_observed: vec![], real: true, t_target_from_source: Isometry3::identity() };
         assert!(may_be_positive(&real_point, 0, true), "every point of a real pair");
         let mut rng = Rng::new(5);
         let source: Vec<Point> = (0..3000).map(|_| Point::new(rng.uniform() as f32, rng.uniform() as f32, 2.0)).collect();
         let t = Isometry3::from_parts(Translation3::new(0.05, 0.0, 0.1), UnitQuaternion::identity());
         let target: Vec<Point> = source.iter().map(|p| t.cast::<f32>() * p).collect();
         // The right half of the target was made by a fill.
-        let target_known: Vec<f32> = target.iter().map(|p| if p.x > 0.55 { 0.0 } else { 1.0 }).collect();
-        let pair = TrainPair { key: "k".into(), source, target, target_known, real: false, t_target_from_source: t };
+        let target_observed: Vec<f32> = target.iter().map(|p| if p.x > 0.55 { 0.0 } else { 1.0 }).collect();
+        let pair = TrainPair { key: "k".into(), source, target, target_observed, real: false, t_target_from_source: t };
         let index = RadiusIndex::new(&pair.target, 0.0375);
         let known = correspondences(&pair, &index, 500, true, &mut Rng::new(1));
         assert_eq!(known.len(), 500);
-        assert_eq!(known.iter().filter(|&&(_, k)| pair.target_known[k] < 0.5).count(), 0, "a filled point became a positive");
+        assert_eq!(known.iter().filter(|&&(_, k)| pair.target_observed[k] < 0.5).count(), 0, "a filled point became a positive");
         // The negative control: without the rule, filled points are drawn too.
         let all = correspondences(&pair, &index, 500, false, &mut Rng::new(1));
-        assert!(all.iter().filter(|&&(_, k)| pair.target_known[k] < 0.5).count() > 100);
+        assert!(all.iter().filter(|&&(_, k)| pair.target_observed[k] < 0.5).count() > 100);
     }
 }

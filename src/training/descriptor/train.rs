@@ -33,11 +33,12 @@ pub struct DescriptorTrainOptions {
     /// many times on average (steps = ⌈epochs × pairs / pairs per step⌉); adding pairs to a mix then no
     /// longer shows each real pair fewer times.
     pub epochs: Option<f64>,
-    /// Positives only on re-projected target points of generated pairs (`target_known_share` ≥ 0.5);
-    /// real pairs and datasets without provenance are unaffected.
+    /// Positives only on observed target points of generated pairs (re-projected or seen by the scene:
+    /// [`super::data::TrainPair::target_observed`] ≥ 0.5); real pairs and datasets without provenance are
+    /// unaffected.
     pub known_positives: bool,
-    /// Drop the filled target points of generated pairs before training: they then appear in no local
-    /// frame, patch, feature or negative.
+    /// Drop the made-up target points of generated pairs (neither re-projected nor seen by the scene)
+    /// before training: they then appear in no local frame, patch, feature or negative.
     pub drop_filled: bool,
     /// Noise and rotation applied each time a pair is drawn.
     pub augment: Augment,
