@@ -14,11 +14,13 @@ module gives the same Python values for all: ``unit_index`` and the unsigned ``s
 ``None`` provenance for version 1, and scene shares of 0 for version 2 (exact: it had no scene).
 """
 
+import hashlib
 import json
 import os
 import pickle
 import posixpath
 import re
+import threading
 from collections import OrderedDict
 
 import numpy as np
@@ -47,6 +49,10 @@ PAIR_COLUMNS = [
 PROVENANCE_COLUMNS = ["target_known_share", "target_view"]
 #: Columns version 3 added (read where a shard has them).
 SCENE_COLUMNS = ["target_scene_share", "scene_frames"]
+#: The stored column of each pair field (the others are stored under their own name).
+FIELD_COLUMNS = {"T_target_from_source": "t_target_from_source"}
+#: Fields a trainer that only registers clouds needs (``fields=MINIMAL_FIELDS``): the clouds and the pose.
+MINIMAL_FIELDS = ("source_points", "target_points", "T_target_from_source")
 #: The schema versions this reader knows.
 SCHEMA_VERSIONS = ("pairs/1", "pairs/2", "pairs/3")
 STATUSES = ("ok", "low_overlap", "too_few_points", "input_error")
@@ -56,13 +62,16 @@ class DatasetError(RuntimeError):
     """Not a readable pointreggpt dataset (no dataset.toml, a bad manifest entry, an unknown schema)."""
 
 
-def open_dataset(url, storage_options=None, filesystem=None):
+def open_dataset(url, storage_options=None, filesystem=None, cache_dir=None, footer_cache=1024):
     """The dataset at ``url`` (a folder, ``s3://bucket/prefix``, ``az://container/prefix``, ``gs://...``).
 
     ``storage_options``: explicit credentials and endpoint (``pointreggpt_data.store``); ``filesystem``: a
-    ready ``pyarrow.fs.FileSystem`` (``url`` is then the path in it).
+    ready ``pyarrow.fs.FileSystem`` (``url`` is then the path in it). ``cache_dir``: on an object store,
+    the row-group reads of the training loaders copy each whole shard file there on its first read (named
+    by its blake3, so a rebuilt dataset never reads a stale copy) and read the copy from then on; a local
+    dataset ignores it. ``footer_cache``: how many shards' parsed footers each process keeps.
     """
-    return Dataset(url, storage_options=storage_options, filesystem=filesystem)
+    return Dataset(url, storage_options=storage_options, filesystem=filesystem, cache_dir=cache_dir, footer_cache=footer_cache)
 
 
 def unsigned_seed(value):
@@ -160,6 +169,11 @@ class Shard:
         state["_groups"] = None
         return state
 
+    @property
+    def blake3(self):
+        """The blake3 of the shard's file, from its manifest entry ("" when the entry has none)."""
+        return str(self.entry.get("blake3", ""))
+
     def __repr__(self):
         return f"Shard({self.index}, {self.path!r}, rows={self.rows}, {self.schema_version})"
 
@@ -172,10 +186,17 @@ class Dataset:
     ``shards`` (the committed shards in shard order), ``num_rows`` (rows of the committed shards).
     """
 
-    def __init__(self, url, storage_options=None, filesystem=None):
+    def __init__(self, url, storage_options=None, filesystem=None, cache_dir=None, footer_cache=1024):
         self.url = str(url)
         self.storage_options = dict(storage_options or {})
         self.filesystem, self.base = filesystem_for(url, storage_options, filesystem)
+        #: An object store (anything but the local filesystem): reads are pre-buffered and may be cached.
+        self.remote = not isinstance(self.filesystem, pafs.LocalFileSystem)
+        #: Where whole shard files of an object store are copied on first read (None: read them in place).
+        self.cache_dir = os.path.abspath(os.fspath(cache_dir)) if cache_dir is not None else None
+        self.footer_cache = max(1, int(footer_cache))
+        self._footers = OrderedDict()
+        self._lock = threading.Lock()
         header = self._read_header()
         self.schema_version = header.get("schema_version", "")
         self.config_hash = header.get("config_hash", "")
@@ -264,10 +285,18 @@ class Dataset:
         for s in self.shards:
             s._fragment = None
             s._groups = None
+        self._lock = threading.Lock()  # a lock held by a thread of the parent at the fork would never be released
         self._pid = os.getpid()
+
+    def __getstate__(self):
+        state = dict(self.__dict__)
+        state["_footers"] = OrderedDict()  # parsed footers stay in the process that read them
+        state["_lock"] = None
+        return state
 
     def __setstate__(self, state):
         self.__dict__.update(state)
+        self._lock = threading.Lock()
         self._pid = os.getpid()  # unpickled: the filesystem client was just made in this process
 
     def fragment(self, shard):
@@ -292,6 +321,82 @@ class Dataset:
         names = self.shard_schema(shard).names
         cols = [c for c in columns if c in names]
         return self.row_groups(shard)[group].to_table(columns=cols, filter=filter)
+
+    # -- row groups through cached footers (the training loaders' path) ---------------------------------
+
+    def _source(self, shard, copy):
+        """(filesystem, path) to read ``shard`` from: the local copy in ``cache_dir`` when ``copy`` and the
+        dataset is on an object store with a ``cache_dir``, else the shard in its store."""
+        if copy and self.remote and self.cache_dir is not None:
+            return pafs.LocalFileSystem(), self.cached_copy(shard)
+        return self.filesystem, shard.path
+
+    def cached_copy(self, shard):
+        """The path of the shard's local copy in ``cache_dir``, downloaded first if it is not there (whole,
+        in 8 MB reads, into a temporary name renamed when complete: concurrent readers never see a partial
+        file). Named by the manifest's blake3 and checked against its byte count."""
+        name = shard.blake3 or hashlib.sha256(self.url.encode()).hexdigest()[:16] + "-" + posixpath.basename(shard.path)[:-8]
+        name += ".parquet"
+        path = os.path.join(self.cache_dir, name)
+        want = shard.entry.get("bytes")
+        if os.path.exists(path) and (want is None or os.path.getsize(path) == int(want)):
+            return path
+        os.makedirs(self.cache_dir, exist_ok=True)
+        tmp = f"{path}.{os.getpid()}-{threading.get_ident()}.part"
+        try:
+            with self.filesystem.open_input_stream(shard.path) as src, open(tmp, "wb") as dst:
+                while True:
+                    block = src.read(8 << 20)
+                    if not block:
+                        break
+                    dst.write(block)
+            if want is not None and os.path.getsize(tmp) != int(want):
+                raise DatasetError(f"{shard.path}: copied {os.path.getsize(tmp)} bytes, the manifest says {want}")
+            os.replace(tmp, path)
+        finally:
+            if os.path.exists(tmp):
+                os.remove(tmp)
+        return path
+
+    def footer(self, shard, copy=True):
+        """The shard's parsed Parquet footer (``pyarrow.parquet.FileMetaData``), read once per process and
+        kept (the last ``footer_cache`` shards): a row-group read then fetches only its column chunks."""
+        self._check_process()
+        with self._lock:
+            meta = self._footers.get(shard.index)
+            if meta is not None:
+                self._footers.move_to_end(shard.index)
+                return meta
+        fs, path = self._source(shard, copy)
+        with fs.open_input_file(path) as f:
+            meta = pq.ParquetFile(f).metadata
+        with self._lock:
+            self._footers[shard.index] = meta
+            while len(self._footers) > self.footer_cache:
+                self._footers.popitem(last=False)
+        return meta
+
+    def group_rows(self, shard):
+        """The number of rows of each row group of the shard, in file order (from its footer)."""
+        meta = self.footer(shard)
+        return [meta.row_group(g).num_rows for g in range(meta.num_row_groups)]
+
+    def read_groups(self, shard, groups, columns, copy=True):
+        """The columns ``columns`` (those the shard has) of the row groups ``groups`` (a list, in that order)
+        of one shard, every row: one open of the file with its cached footer, only those column chunks
+        read and decoded (on an object store, pre-buffered: the chunks are fetched in a few concurrent,
+        coalesced requests). Safe to call from several threads at once."""
+        meta = self.footer(shard, copy)
+        names = meta.schema.to_arrow_schema().names
+        cols = [c for c in columns if c in names]
+        fs, path = self._source(shard, copy)
+        with fs.open_input_file(path) as f:
+            reader = pq.ParquetFile(f, metadata=meta, pre_buffer=self.remote and fs is self.filesystem)
+            return reader.read_row_groups(list(groups), columns=cols, use_threads=False)
+
+    def read_group(self, shard, group, columns, copy=True):
+        """As ``read_groups`` for one row group."""
+        return self.read_groups(shard, [group], columns, copy)
 
     def shard_schema(self, shard):
         """The Arrow schema of a shard's file (from its footer, read once)."""
@@ -360,62 +465,109 @@ PAIR_FIELDS = (
 )
 
 
-class DecodedShard:
-    """A shard's pair columns decoded once into flat numpy buffers; ``pair(i)`` slices row ``i``."""
+def field_columns(fields):
+    """The stored columns the pair fields ``fields`` are read from (``target_scene_share`` brings
+    ``target_known_share`` along: a version-2 shard has no scene column, and its zeros follow the known
+    shares' lengths)."""
+    cols = []
+    for f in fields:
+        if f not in PAIR_FIELDS:
+            raise KeyError(f"{f!r} is not a pair field ({', '.join(PAIR_FIELDS)}); other columns go in columns=")
+        c = FIELD_COLUMNS.get(f, f)
+        if c not in cols:
+            cols.append(c)
+        if f == "target_scene_share" and "target_known_share" not in cols:
+            cols.append("target_known_share")
+    return cols
 
-    def __init__(self, table, extra=()):
+
+class DecodedShard:
+    """Rows of pair columns (a shard, a row group) decoded once into flat numpy buffers; ``pair(i)``
+    slices row ``i``. ``fields``: the pair fields to give (default every one of ``PAIR_FIELDS``); the
+    table must hold their columns (``field_columns``), and may lack the provenance (version 1) or the
+    scene share (version 2). ``extra``: more columns, given as Python values."""
+
+    def __init__(self, table, extra=(), fields=None):
         self.n = table.num_rows
+        self.fields = tuple(PAIR_FIELDS if fields is None else fields)
+        want = set(self.fields)
+        names = set(table.column_names)
         col = lambda name: table.column(name).combine_chunks() if table.num_rows else table.column(name)
-        self.pair_key = table.column("pair_key").to_pylist()
-        self.scene = table.column("scene").to_pylist()
-        self.status = table.column("status").to_pylist()
-        self.unit_index = [int(u) for u in table.column("unit_index").to_pylist()]
-        self.seed = [unsigned_seed(s) for s in table.column("seed").to_pylist()]
-        self.overlap_source = table.column("overlap_source").to_numpy().astype(np.float64)
-        self.overlap_target = table.column("overlap_target").to_numpy().astype(np.float64)
-        if self.n:
+        self.pair_key = table.column("pair_key").to_pylist() if "pair_key" in want else None
+        self.scene = table.column("scene").to_pylist() if "scene" in want else None
+        self.status = table.column("status").to_pylist() if "status" in want else None
+        self.unit_index = [int(u) for u in table.column("unit_index").to_pylist()] if "unit_index" in names else None
+        self.seed = [unsigned_seed(s) for s in table.column("seed").to_pylist()] if "seed" in want else None
+        self.overlap_source = table.column("overlap_source").to_numpy().astype(np.float64) if "overlap_source" in want else None
+        self.overlap_target = table.column("overlap_target").to_numpy().astype(np.float64) if "overlap_target" in want else None
+        self.transform = self.source = self.target = None
+        if self.n and "T_target_from_source" in want:
             t = col("t_target_from_source")
             self.transform = np.asarray(t.flatten().to_numpy(zero_copy_only=False), dtype=np.float64).reshape(self.n, 4, 4)
+        if self.n and "source_points" in want:
             self.source, self.source_off = _flat_points(col("source_points"))
+        if self.n and "target_points" in want:
             self.target, self.target_off = _flat_points(col("target_points"))
-        self.provenance = all(c in table.column_names for c in PROVENANCE_COLUMNS)
+        # Version 1 has no provenance column; version 2 has no scene share (its zeros follow the known shares).
+        self.provenance = any(c in names for c in PROVENANCE_COLUMNS + ["target_scene_share"])
+        self.known = self.scene_share = self.view = None
         if self.provenance and self.n:
-            self.known, self.known_off = _flat_values(col("target_known_share"), np.float32)
-            self.view, self.view_off = _flat_values(col("target_view"), np.int8)
-            if "target_scene_share" in table.column_names:
-                self.scene_share, self.scene_off = _flat_values(col("target_scene_share"), np.float32)
-            else:  # version 2: no scene
-                self.scene_share, self.scene_off = np.zeros(len(self.known), dtype=np.float32), self.known_off
-            offsets = (self.known_off, self.scene_off, self.view_off)
-            if not all(np.array_equal(o, self.target_off) for o in offsets):
-                bad = [self.pair_key[i] for i in range(self.n) if len({int(o[i + 1] - o[i]) for o in offsets + (self.target_off,)}) != 1]
+            aligned = []
+            if "target_known_share" in names:
+                self.known, self.known_off = _flat_values(col("target_known_share"), np.float32)
+                aligned.append(self.known_off)
+            if "target_view" in want and "target_view" in names:
+                self.view, self.view_off = _flat_values(col("target_view"), np.int8)
+                aligned.append(self.view_off)
+            if "target_scene_share" in want:
+                if "target_scene_share" in names:
+                    self.scene_share, self.scene_off = _flat_values(col("target_scene_share"), np.float32)
+                else:  # version 2: no scene
+                    self.scene_share, self.scene_off = np.zeros(len(self.known), dtype=np.float32), self.known_off
+                aligned.append(self.scene_off)
+            if self.target is not None:
+                aligned.append(self.target_off)
+            if any(not np.array_equal(o, aligned[0]) for o in aligned[1:]):
+                keys = table.column("pair_key").to_pylist() if "pair_key" in names else list(range(self.n))
+                bad = [keys[i] for i in range(self.n) if len({int(o[i + 1] - o[i]) for o in aligned}) != 1]
                 raise DatasetError(f"provenance lists not aligned with target_points in pair(s) {bad[:5]}")
         self.extra = {c: table.column(c).to_pylist() for c in extra}
-        self.order = sorted(range(self.n), key=lambda i: self.unit_index[i])
-        self.row_of = {u: i for i, u in enumerate(self.unit_index)}
+        if self.unit_index is not None:
+            self.order = sorted(range(self.n), key=lambda i: self.unit_index[i])
+            self.row_of = {u: i for i, u in enumerate(self.unit_index)}
+        else:
+            self.order = list(range(self.n))
+            self.row_of = None
 
     def pair(self, i):
-        s0, s1 = self.source_off[i], self.source_off[i + 1]
-        t0, t1 = self.target_off[i], self.target_off[i + 1]
-        out = {
-            "pair_key": self.pair_key[i],
-            "scene": self.scene[i],
-            "status": self.status[i],
-            "unit_index": self.unit_index[i],
-            "seed": self.seed[i],
-            "source_points": self.source[s0:s1].copy(),
-            "target_points": self.target[t0:t1].copy(),
-            "T_target_from_source": self.transform[i].copy(),
-            "overlap_source": float(self.overlap_source[i]),
-            "overlap_target": float(self.overlap_target[i]),
-            "target_known_share": None,
-            "target_scene_share": None,
-            "target_view": None,
-        }
-        if self.provenance:
-            out["target_known_share"] = self.known[self.known_off[i]:self.known_off[i + 1]].copy()
-            out["target_scene_share"] = self.scene_share[self.scene_off[i]:self.scene_off[i + 1]].copy()
-            out["target_view"] = self.view[self.view_off[i]:self.view_off[i + 1]].copy()
+        out = {}
+        for f in self.fields:
+            if f == "pair_key":
+                out[f] = self.pair_key[i]
+            elif f == "scene":
+                out[f] = self.scene[i]
+            elif f == "status":
+                out[f] = self.status[i]
+            elif f == "unit_index":
+                out[f] = self.unit_index[i]
+            elif f == "seed":
+                out[f] = self.seed[i]
+            elif f == "source_points":
+                out[f] = self.source[self.source_off[i]:self.source_off[i + 1]].copy()
+            elif f == "target_points":
+                out[f] = self.target[self.target_off[i]:self.target_off[i + 1]].copy()
+            elif f == "T_target_from_source":
+                out[f] = self.transform[i].copy()
+            elif f == "overlap_source":
+                out[f] = float(self.overlap_source[i])
+            elif f == "overlap_target":
+                out[f] = float(self.overlap_target[i])
+            elif f == "target_known_share":
+                out[f] = self.known[self.known_off[i]:self.known_off[i + 1]].copy() if self.provenance else None
+            elif f == "target_scene_share":
+                out[f] = self.scene_share[self.scene_off[i]:self.scene_off[i + 1]].copy() if self.provenance else None
+            elif f == "target_view":
+                out[f] = self.view[self.view_off[i]:self.view_off[i + 1]].copy() if self.provenance else None
         for c, values in self.extra.items():
             out[c] = values[i]
         return out

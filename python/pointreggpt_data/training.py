@@ -6,11 +6,14 @@ plain classes (numpy samples), and ``collate`` returns numpy arrays.
 """
 
 import random
+from collections import OrderedDict
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
 from .dataset import (
-    INDEX_COLUMNS, PAIR_COLUMNS, PROVENANCE_COLUMNS, DecodedShard, ShardCache, open_dataset, selection_expression,
+    INDEX_COLUMNS, PAIR_COLUMNS, PAIR_FIELDS, PROVENANCE_COLUMNS, DecodedShard, ShardCache, field_columns, open_dataset,
+    selection_expression,
 )
 
 try:  # optional
@@ -27,6 +30,39 @@ _POINT_FIELDS = (("source_points", "source"), ("target_points", "target"),
                  ("target_known_share", "target"), ("target_scene_share", "target"), ("target_view", "target"))
 
 
+def _fields(fields):
+    """The pair fields to give: ``None`` for every one of ``PAIR_FIELDS``; ``unit_index`` always."""
+    fields = PAIR_FIELDS if fields is None else tuple(fields)
+    unknown = [f for f in fields if f not in PAIR_FIELDS]
+    if unknown:
+        raise KeyError(f"not pair fields: {unknown} (fields are {', '.join(PAIR_FIELDS)}; other columns go in columns=)")
+    return fields if "unit_index" in fields else ("unit_index",) + fields
+
+
+def _wanted(columns, fields=None):
+    """The columns a pair is read from (those of ``fields``, default every pair field), then the extra ``columns``."""
+    base = field_columns(_fields(fields))
+    return base + [c for c in columns if c not in base]
+
+
+def _selected_rows(dataset, shard, expr):
+    """(row positions in the file, unit indices) of the rows of ``shard`` that ``expr`` selects (every row
+    when None): one read of the small columns of the whole shard (from the store, never a local copy)."""
+    names = dataset.footer(shard, copy=False).schema.to_arrow_schema().names
+    cols = ["unit_index"] if expr is None else [c for c in INDEX_COLUMNS if c in names]
+    t = dataset.read_groups(shard, range(len(dataset.group_rows(shard))), cols, copy=False)
+    t = t.append_column("__row", _pa().array(np.arange(t.num_rows, dtype=np.int64)))
+    if expr is not None:
+        t = t.filter(expr)
+    return np.asarray(t.column("__row").to_numpy(), dtype=np.int64), np.asarray(t.column("unit_index").to_numpy(), dtype=np.int64)
+
+
+def _pa():
+    import pyarrow
+
+    return pyarrow
+
+
 class PairDataset(_Base):
     """The selected pairs of a dataset, indexable in unit order; each item is a dict (``PAIR_FIELDS`` of
     ``pointreggpt_data.dataset``): source/target points float32 (N, 3)/(M, 3), ``T_target_from_source``
@@ -36,33 +72,46 @@ class PairDataset(_Base):
     ``dataset``: a ``Dataset`` or a URL/path (opened with ``storage_options``). Selection: ``status``
     (default ``"ok"``; ``None`` for every row), ``scene``, ``overlap_source``/``overlap_target`` (inclusive
     ``(low, high)``), ``where`` (a ``pyarrow.compute`` expression over ``INDEX_COLUMNS``). ``tensors=True``
-    returns torch tensors instead of numpy arrays. ``columns``: more columns to return, as Python values
-    (e.g. ``["source_intrinsics"]``). ``cache_shards``: decoded row groups kept per process (1 by
-    default: iterate in order or with ``ShardShuffleSampler``; a fully random order reads a row group per
-    item: at most the build's ``output.row_group_rows`` pairs, 16 by default). For training, ``StreamingPairDataset`` is faster.
+    returns torch tensors instead of numpy arrays. ``fields``: the pair fields to read and give (default
+    every one; ``MINIMAL_FIELDS`` = the two clouds and the pose; ``unit_index`` always): only their
+    columns are read and decoded, never the depth PNGs. ``columns``: more stored columns to return, as
+    Python values (e.g. ``["source_intrinsics"]``). ``cache_groups``: decoded row groups kept per process
+    (8 by default; ``cache_shards`` is its old name).
 
-    Building the index reads only the unit indices (and the filter's columns) of each row group; an item
-    reads the pair columns of its row group once (then served from the cache).
+    An item reads and decodes its whole row group (at most the build's ``output.row_group_rows`` pairs, 16
+    by default), through the shard's footer read once per process (``Dataset.footer``), and keeps it: a
+    random order pays a row group per item; ``GroupShuffleSampler`` (random, reading each row group once
+    per epoch and worker) or ``ShardShuffleSampler`` serve the other pairs of a group from the cache.
+    Building the index reads only the unit indices (and the filter's small columns) of each shard once.
     """
 
     def __init__(self, dataset, status="ok", scene=None, overlap_source=None, overlap_target=None, where=None,
-                 tensors=False, columns=(), cache_shards=1, storage_options=None):
+                 tensors=False, columns=(), cache_groups=8, storage_options=None, fields=None, cache_shards=None):
         if tensors and _torch is None:
             raise ImportError("PairDataset(tensors=True) needs torch (pip install torch)")
         self.dataset = dataset if hasattr(dataset, "shards") else open_dataset(dataset, storage_options=storage_options)
         self.tensors = tensors
         self.columns = list(columns)
-        self.cache_shards = cache_shards
+        self.fields = _fields(fields)
+        self.cache_groups = int(cache_shards if cache_shards is not None else cache_groups)
         self._filter = selection_expression(status, scene, overlap_source, overlap_target, where)
-        index = []  # (unit_index, shard position, row group)
+        units, shards, groups, rows = [], [], [], []
         for k, shard in enumerate(self.dataset.shards):
-            for g in range(len(self.dataset.row_groups(shard))):
-                units = self.dataset.read_row_group(shard, g, ["unit_index"], self._filter).column("unit_index").to_pylist()
-                index.extend((int(u), k, g) for u in units)
-        index.sort()
-        self.unit_index = [u for u, _, _ in index]
-        self._shard = [k for _, k, _ in index]
-        self._group = [g for _, _, g in index]
+            starts = np.cumsum([0] + self.dataset.group_rows(shard))
+            positions, unit = _selected_rows(self.dataset, shard, self._filter)
+            g = np.searchsorted(starts, positions, side="right") - 1
+            units.append(unit)
+            shards.append(np.full(len(unit), k, dtype=np.int32))
+            groups.append(g.astype(np.int32))
+            rows.append((positions - starts[g]).astype(np.int32))
+        cat = lambda parts, t: np.concatenate(parts).astype(t) if parts else np.zeros(0, t)
+        unit = cat(units, np.int64)
+        order = np.argsort(unit.view(np.uint64) if unit.dtype == np.int64 else unit, kind="stable")
+        #: Unit index, shard position, row group and row in the group of every item (unit order).
+        self.unit_index = unit[order]
+        self._shard = cat(shards, np.int32)[order]
+        self._group = cat(groups, np.int32)[order]
+        self._row = cat(rows, np.int32)[order]
         self._cache = None
 
     def __len__(self):
@@ -70,17 +119,22 @@ class PairDataset(_Base):
 
     def shard_of(self, i):
         """The position (in ``dataset.shards``) of the shard holding item ``i``."""
-        return self._shard[i]
+        return int(self._shard[i])
 
     def group_of(self, i):
         """The row group (of its shard) holding item ``i``."""
-        return self._group[i]
+        return int(self._group[i])
+
+    def groups(self):
+        """Every item's (shard position, row group) as two int arrays, in item order (for samplers)."""
+        return self._shard, self._group
 
     def _decoded(self, k, g):
         if self._cache is None:  # made lazily, so each DataLoader worker process has its own
-            self._cache = ShardCache(self.cache_shards)
+            self._cache = ShardCache(self.cache_groups)
         shard = self.dataset.shards[k]
-        return self._cache.get((k, g), lambda: DecodedShard(self.dataset.read_row_group(shard, g, _wanted(self.columns), self._filter), extra=self.columns))
+        return self._cache.get((k, g), lambda: DecodedShard(
+            self.dataset.read_group(shard, g, _wanted(self.columns, self.fields)), extra=self.columns, fields=self.fields))
 
     def __getitem__(self, i):
         i = int(i)
@@ -88,23 +142,16 @@ class PairDataset(_Base):
             i += len(self)
         if not 0 <= i < len(self):
             raise IndexError(i)
-        k, g, unit = self._shard[i], self._group[i], self.unit_index[i]
+        k, g, row, unit = int(self._shard[i]), int(self._group[i]), int(self._row[i]), int(self.unit_index[i])
         decoded = self._decoded(k, g)
-        row = decoded.row_of.get(unit)
-        if row is None:
-            raise RuntimeError(f"shard {self.dataset.shards[k].path} has no unit {unit} any more: it changed since the index was built")
+        if row >= decoded.n or decoded.unit_index[row] != unit:
+            raise RuntimeError(f"shard {self.dataset.shards[k].path} has no unit {unit} at row {row} of group {g} any more: it changed since the index was built")
         return _as_tensors(decoded.pair(row)) if self.tensors else decoded.pair(row)
 
     def __getstate__(self):
         state = dict(self.__dict__)
-        state["_cache"] = None  # decoded shards stay in the process that decoded them
+        state["_cache"] = None  # decoded groups stay in the process that decoded them
         return state
-
-
-def _wanted(columns):
-    """The columns a pair is read from, then the extra ``columns``."""
-    base = PAIR_COLUMNS + PROVENANCE_COLUMNS + ["target_scene_share"]
-    return base + [c for c in columns if c not in base]
 
 
 def _as_tensors(item):
@@ -114,27 +161,65 @@ def _as_tensors(item):
     return item
 
 
+def bounded_shuffle(items, size, rng):
+    """Yields ``items`` shuffled through a buffer of ``size`` items, with a bound: the item that arrived
+    ``a``-th (from 0) leaves as the ``o``-th with ``a - size <= o <= a + size``. The buffer holds ``size``
+    items; each arrival sends out one of them at random, except that an item due (``o = a + size``)
+    leaves first; at most one is due at a time, as arrivals are one apart, so the bound always holds.
+    Unlike a plain random-replacement buffer, no item lingers to the end of the epoch."""
+    if size < 1:
+        raise ValueError("the shuffle buffer must hold at least 1 item")
+    slots, where, held = [], {}, {}  # arrival numbers in the buffer; their positions in slots; the items
+    out = 0
+
+    def take():
+        nonlocal out
+        due = out - size
+        a = due if due in held else slots[rng.randrange(len(slots))]
+        j = where.pop(a)
+        last = slots.pop()
+        if last != a:
+            slots[j] = last
+            where[last] = j
+        out += 1
+        return held.pop(a)
+
+    for a, item in enumerate(items):
+        slots.append(a)
+        where[a] = len(slots) - 1
+        held[a] = item
+        if len(slots) > size:
+            yield take()
+    while slots:
+        yield take()
+
+
 class StreamingPairDataset(_IterBase):
     """The selected pairs of a dataset, streamed for training: an iterable dataset (``torch.utils.data.
-    IterableDataset``) that reads the committed shards one row group at a time (only the pair columns),
-    each item a dict as ``PairDataset`` gives.
+    IterableDataset``) that reads the committed shards a few row groups at a time (only the columns of
+    ``fields``), each item a dict as ``PairDataset`` gives.
 
     Every pair is yielded exactly once per epoch across all distributed ranks × DataLoader workers: the
-    row groups of the dataset (the same list on every rank, shuffled with ``seed + epoch`` when
-    ``shuffle``) are dealt round-robin to the ``world_size × num_workers`` consumers, and each consumer
-    shuffles its pairs through a buffer of ``buffer_size`` pairs (memory: about ``buffer_size`` × 0.2 MB).
-    ``rank`` / ``world_size`` default to ``torch.distributed``'s when it is initialized, else 0 / 1; the
-    worker comes from ``torch.utils.data.get_worker_info()``. Consumers get whole row groups, so their pair
-    counts differ by up to a row group's (``output.row_group_rows``, 16 by default): with DistributedDataParallel, end the epoch on the
-    shortest rank (e.g. ``torch.distributed.algorithms.join.Join``) or drop the remainder.
+    pieces of the dataset (runs of consecutive row groups of one shard, of at most ``piece_rows`` rows or
+    one group; the same list on every rank), shuffled with ``seed + epoch`` when ``shuffle``, are dealt
+    round-robin to the ``world_size × num_workers`` consumers, and each consumer shuffles its pairs through
+    a buffer of ``buffer_size`` pairs (``bounded_shuffle``: an item leaves at most ``buffer_size`` places
+    from where it arrived; memory about ``buffer_size`` × 0.2 MB). ``rank`` / ``world_size`` default to
+    ``torch.distributed``'s when it is initialized, else 0 / 1; the worker comes from
+    ``torch.utils.data.get_worker_info()``. Consumers get whole pieces, so their pair counts differ by up
+    to a piece: with DistributedDataParallel, end the epoch on the shortest rank (e.g.
+    ``torch.distributed.algorithms.join.Join``) or drop the remainder.
 
-    Call ``set_epoch(e)`` before each epoch's iteration (with ``persistent_workers=False``, the default,
-    each epoch's workers receive the new epoch). Selection arguments as ``PairDataset``.
+    ``readahead``: pieces each consumer reads ahead on background threads (reading and decoding release
+    the GIL; default 2 for a folder, 8 for an object store, whose latency it hides); 0 reads in the
+    consuming thread. Call ``set_epoch(e)`` before each epoch's iteration (with
+    ``persistent_workers=False``, the default, each epoch's workers receive the new epoch). Selection
+    arguments and ``fields`` as ``PairDataset``.
     """
 
     def __init__(self, dataset, status="ok", scene=None, overlap_source=None, overlap_target=None, where=None,
                  tensors=False, columns=(), shuffle=True, buffer_size=256, seed=0, rank=None, world_size=None,
-                 storage_options=None):
+                 storage_options=None, fields=None, readahead=None, piece_rows=16):
         if tensors and _torch is None:
             raise ImportError("StreamingPairDataset(tensors=True) needs torch (pip install torch)")
         if buffer_size < 1:
@@ -142,14 +227,27 @@ class StreamingPairDataset(_IterBase):
         self.dataset = dataset if hasattr(dataset, "shards") else open_dataset(dataset, storage_options=storage_options)
         self.tensors = tensors
         self.columns = list(columns)
+        self.fields = _fields(fields)
         self.shuffle = shuffle
         self.buffer_size = int(buffer_size)
         self.seed = int(seed)
         self.epoch = 0
         self.rank, self.world_size = rank, world_size
+        self.readahead = (8 if self.dataset.remote else 2) if readahead is None else int(readahead)
         self._filter = selection_expression(status, scene, overlap_source, overlap_target, where)
-        #: (shard position, row group) of every row group of the committed shards, in file order.
-        self.pieces = [(k, g) for k, shard in enumerate(self.dataset.shards) for g in range(len(self.dataset.row_groups(shard)))]
+        #: (shard position, (row groups...)) of every piece: consecutive row groups of one shard holding at
+        #: most ``piece_rows`` rows (or one group), in file order.
+        self.pieces = []
+        for k, shard in enumerate(self.dataset.shards):
+            run, rows = [], 0
+            for g, n in enumerate(self.dataset.group_rows(shard)):
+                if run and rows + n > piece_rows:
+                    self.pieces.append((k, tuple(run)))
+                    run, rows = [], 0
+                run.append(g)
+                rows += n
+            if run:
+                self.pieces.append((k, tuple(run)))
 
     def set_epoch(self, epoch):
         self.epoch = int(epoch)
@@ -168,37 +266,139 @@ class StreamingPairDataset(_IterBase):
         return rank * workers + worker, world * workers
 
     def pieces_of(self, consumer, consumers):
-        """The row groups consumer ``consumer`` of ``consumers`` reads this epoch, in reading order."""
+        """The pieces consumer ``consumer`` of ``consumers`` reads this epoch, in reading order."""
         order = list(range(len(self.pieces)))
         if self.shuffle:
             random.Random(self.seed * 1_000_003 + self.epoch).shuffle(order)
         return [self.pieces[i] for i in order[consumer::consumers]]
 
+    def _read(self, piece):
+        k, groups = piece
+        shard = self.dataset.shards[k]
+        cols = _wanted(self.columns, self.fields)
+        if self._filter is not None:
+            cols += [c for c in INDEX_COLUMNS if c not in cols]
+        table = self.dataset.read_groups(shard, groups, cols)
+        if self._filter is not None:
+            table = table.filter(self._filter)
+        return DecodedShard(table, extra=self.columns, fields=self.fields)
+
+    def _decoded(self, pieces):
+        if self.readahead <= 0:
+            for piece in pieces:
+                yield self._read(piece)
+            return
+        with ThreadPoolExecutor(max_workers=self.readahead) as pool:
+            pending, it = [], iter(pieces)
+            for piece in it:
+                pending.append(pool.submit(self._read, piece))
+                if len(pending) > self.readahead:
+                    yield pending.pop(0).result()
+            for f in pending:
+                yield f.result()
+
+    def _items(self, pieces):
+        for decoded in self._decoded(pieces):
+            for i in decoded.order:
+                yield _as_tensors(decoded.pair(i)) if self.tensors else decoded.pair(i)
+
     def __iter__(self):
         consumer, consumers = self.consumer()
+        items = self._items(self.pieces_of(consumer, consumers))
+        if not self.shuffle:
+            return items
         rng = random.Random((self.seed * 1_000_003 + self.epoch) * 65_537 + consumer)
-        buffer = []
-        for k, g in self.pieces_of(consumer, consumers):
-            decoded = DecodedShard(self.dataset.read_row_group(self.dataset.shards[k], g, _wanted(self.columns), self._filter), extra=self.columns)
-            for i in decoded.order:
-                item = _as_tensors(decoded.pair(i)) if self.tensors else decoded.pair(i)
-                if not self.shuffle:
-                    yield item
-                elif len(buffer) < self.buffer_size:
-                    buffer.append(item)
-                else:
-                    j = rng.randrange(len(buffer))
-                    buffer[j], item = item, buffer[j]
-                    yield item
-        rng.shuffle(buffer)
-        yield from buffer
+        return bounded_shuffle(items, self.buffer_size, rng)
+
+
+def _rank_world(rank, world_size):
+    if world_size is None:
+        dist = getattr(_torch, "distributed", None)
+        ready = dist is not None and dist.is_available() and dist.is_initialized()
+        return (dist.get_rank(), dist.get_world_size()) if ready else (0, 1)
+    if not 0 <= rank < world_size:
+        raise ValueError(f"rank {rank} is not in 0..{world_size - 1}")
+    return rank, world_size
+
+
+class GroupShuffleSampler:
+    """Indices of a ``PairDataset`` in a random order that decodes each row group once per epoch: the
+    sampler for random access (``DataLoader(pairs, batch_size=B, sampler=GroupShuffleSampler(pairs,
+    batch_size=B, num_workers=W), ...)``).
+
+    Each epoch (seed ``seed + epoch``) the row groups are shuffled and dealt round-robin to the distributed
+    ranks (``rank``/``world_size``, default ``torch.distributed``'s when initialized: every pair exactly
+    once per epoch across ranks, whose counts differ by up to a row group); a rank's groups are dealt to
+    ``num_workers`` lanes (one per DataLoader worker, 1 for ``num_workers=0``); each lane takes ``mix``
+    groups at a time and yields their pairs in a random order; and the lanes are interleaved ``batch_size``
+    items at a time, the order in which a DataLoader deals batches to its workers, so that the pairs of a
+    group reach the worker that decoded it (``PairDataset`` keeps the last ``cache_groups`` groups; give it
+    at least ``2 * mix``).
+
+    What it does to randomness: the order of the groups is uniform over the epoch, but a batch holds pairs
+    of about ``max(1, mix * group_rows / batch_size)`` ... ``mix + 1`` groups only, and the pairs of a group are
+    consecutive units (with ``samples_per_frame`` ≥ the group's rows, the samples of one source frame), so
+    the pairs within a batch are correlated; a larger ``mix`` (or smaller row groups) spreads a batch over
+    more groups at the cost of a larger cache. A fully random order (``RandomSampler``) decodes a row group
+    per pair. ``set_epoch(e)`` changes the order.
+    """
+
+    def __init__(self, dataset, batch_size=1, num_workers=0, mix=1, seed=0, rank=None, world_size=None):
+        self.dataset = dataset
+        self.batch_size = max(1, int(batch_size))
+        self.lanes = max(1, int(num_workers))
+        self.mix = max(1, int(mix))
+        self.seed = int(seed)
+        self.epoch = 0
+        self.rank, self.world_size = rank, world_size
+
+    def set_epoch(self, epoch):
+        self.epoch = int(epoch)
+
+    def _mine(self):
+        """Every group's items (lists of item numbers), this rank's groups in this epoch's order."""
+        shard, group = self.dataset.groups()
+        shard, group = np.asarray(shard, dtype=np.int64), np.asarray(group, dtype=np.int64)
+        key = (shard << 32) | group
+        order = np.argsort(key, kind="stable")
+        uniq, starts = np.unique(key[order], return_index=True)
+        bounds = list(starts) + [len(order)]
+        members = [order[bounds[j]:bounds[j + 1]].tolist() for j in range(len(uniq))]
+        rng = random.Random(self.seed * 1_000_003 + self.epoch)
+        rng.shuffle(members)
+        rank, world = _rank_world(self.rank, self.world_size)
+        return members[rank::world], rng
+
+    def __len__(self):
+        return sum(len(m) for m in self._mine()[0])
+
+    def __iter__(self):
+        members, rng = self._mine()
+        lanes = []
+        for lane in range(self.lanes):
+            groups = members[lane::self.lanes]
+            items = []
+            for j in range(0, len(groups), self.mix):
+                window = [i for g in groups[j:j + self.mix] for i in g]
+                rng.shuffle(window)
+                items.extend(window)
+            lanes.append(items)
+        pos = [0] * self.lanes
+        lane = 0
+        while any(p < len(items) for p, items in zip(pos, lanes)):
+            if pos[lane] < len(lanes[lane]):
+                chunk = lanes[lane][pos[lane]:pos[lane] + self.batch_size]
+                pos[lane] += len(chunk)
+                yield from chunk
+            lane = (lane + 1) % self.lanes
 
 
 class ShardShuffleSampler:
     """Indices of a ``PairDataset`` in a shuffled order that reads each row group once per epoch: the shards
     in a random order, the row groups of each shard in a random order, the items of each row group
     shuffled. ``set_epoch(e)`` changes the order (the seed is ``seed + epoch``). Pass it as
-    ``DataLoader(..., sampler=ShardShuffleSampler(ds))``; ``StreamingPairDataset`` is the faster path."""
+    ``DataLoader(..., sampler=ShardShuffleSampler(ds))``; ``GroupShuffleSampler`` mixes more and fits
+    DataLoader workers; ``StreamingPairDataset`` is the faster path."""
 
     def __init__(self, dataset, seed=0):
         self.dataset = dataset
@@ -248,23 +448,31 @@ def collate(samples):
     """
     if not samples:
         raise ValueError("collate: empty batch")
-    as_torch = _torch is not None and isinstance(samples[0]["source_points"], _torch.Tensor)
+    first = samples[0]
+    as_torch = _torch is not None and any(isinstance(v, _torch.Tensor) for v in first.values())
     to_np = (lambda x: x.numpy()) if as_torch else np.asarray
     out = {}
     for cloud in ("source", "target"):
+        if f"{cloud}_points" not in first:  # not among the dataset's fields
+            continue
         lengths = np.array([len(s[f"{cloud}_points"]) for s in samples], dtype=np.int64)
         out[f"{cloud}_lengths"] = lengths
         out[f"{cloud}_batch"] = np.repeat(np.arange(len(samples), dtype=np.int64), lengths)
     for field, _ in _POINT_FIELDS:
+        if field not in first:
+            continue
         values = [s.get(field) for s in samples]
         if any(v is None for v in values):
             out[field] = None
         else:
             out[field] = np.concatenate([to_np(v) for v in values], axis=0)
-    out["T_target_from_source"] = np.stack([to_np(s["T_target_from_source"]) for s in samples]).astype(np.float64, copy=False)
+    if "T_target_from_source" in first:
+        out["T_target_from_source"] = np.stack([to_np(s["T_target_from_source"]) for s in samples]).astype(np.float64, copy=False)
     for field in ("overlap_source", "overlap_target"):
-        out[field] = np.array([s[field] for s in samples], dtype=np.float64)
-    out["unit_index"] = np.array([s["unit_index"] for s in samples], dtype=np.int64)
+        if field in first:
+            out[field] = np.array([s[field] for s in samples], dtype=np.float64)
+    if "unit_index" in first:
+        out["unit_index"] = np.array([s["unit_index"] for s in samples], dtype=np.int64)
     if as_torch:
         keys = [k for k, v in out.items() if isinstance(v, np.ndarray)]
         in_worker = _torch.utils.data.get_worker_info() is not None  # the batch goes to another process
@@ -295,4 +503,4 @@ def _one_storage(arrays):
 _TORCH_DTYPES = {np.dtype(t): getattr(_torch, t) for t in ("float32", "float64", "int64", "int8")} if _torch is not None else {}
 
 
-__all__ = ["PairDataset", "StreamingPairDataset", "ShardShuffleSampler", "collate", "INDEX_COLUMNS"]
+__all__ = ["PairDataset", "StreamingPairDataset", "GroupShuffleSampler", "ShardShuffleSampler", "bounded_shuffle", "collate", "INDEX_COLUMNS"]
