@@ -2,7 +2,7 @@
 """The training loaders of pointreggpt_data against pyarrow's own row-group loop (benchmarks/loader.sh, issue 50).
 
   loader_peers.py DATASET MODE [MODE...] [--limit N] [--fields all|minimal] [--storage-options JSON]
-                  [--cache-dir DIR] [--mix M] [--package DIR] [--repeat R]
+                  [--cache-dir DIR] [--mix M] [--package DIR] [--repeat R] [--piece-rows N] [--readahead N]
 
 Prints one JSON line per mode: {"mode", "pairs", "seconds", "pairs_per_s", ...}. Every mode reads the same
 pair columns (the clouds, the pose, the per-point provenance, keys and overlaps: the package's default
@@ -18,7 +18,7 @@ torch tensor) of every cloud of every pair. Modes:
                             0 or 2 workers.
   random_0, random_2        PairDataset(tensors=True) with a shuffled sampler (DataLoader(shuffle=True):
                             uniformly random order), batch 8, collate, 0 or 2 workers.
-  group_0, group_2          the same with GroupShuffleSampler(batch_size=8, num_workers=W, mix=M).
+  group_0, group_2          the same with GroupShuffleSampler(batch_size=8, num_workers=W, mix=M), M 8 by default.
 
 `--limit N` stops a mode after N pairs (the rate is over what was read); the DataLoader modes count the
 pairs of the batches they received. `--package DIR` imports pointreggpt_data from DIR first (to time
@@ -113,14 +113,20 @@ def run(mode, args, prd, torch):
         kw = {} if fields is None else {"fields": fields}
         t0 = time.perf_counter()
         if kind == "stream":
+            if args.piece_rows:
+                kw["piece_rows"] = args.piece_rows
+            if args.readahead is not None:
+                kw["readahead"] = args.readahead
             data = prd.StreamingPairDataset(open_ds(), tensors=True, seed=0, **kw)
+            extra["pieces"] = len(data.pieces)
+            extra["readahead"] = data.readahead
             loader = torch.utils.data.DataLoader(data, batch_size=8, collate_fn=prd.collate, num_workers=workers)
         elif kind == "random":
             data = prd.PairDataset(open_ds(), tensors=True, **kw)
             loader = torch.utils.data.DataLoader(data, batch_size=8, shuffle=True, collate_fn=prd.collate, num_workers=workers,
                                                  generator=torch.Generator().manual_seed(0))
         elif kind == "group":
-            data = prd.PairDataset(open_ds(), tensors=True, cache_groups=max(8, 2 * args.mix + 2), **kw)
+            data = prd.PairDataset(open_ds(), tensors=True, cache_groups=max(16, 2 * args.mix), **kw)
             sampler = prd.GroupShuffleSampler(data, batch_size=8, num_workers=workers, mix=args.mix)
             loader = torch.utils.data.DataLoader(data, batch_size=8, sampler=sampler, collate_fn=prd.collate, num_workers=workers)
             extra["mix"] = args.mix
@@ -139,8 +145,10 @@ def main():
     ap.add_argument("--fields", choices=["all", "minimal"], default="all")
     ap.add_argument("--storage-options")
     ap.add_argument("--cache-dir")
-    ap.add_argument("--mix", type=int, default=1)
+    ap.add_argument("--mix", type=int, default=8)
     ap.add_argument("--package")
+    ap.add_argument("--piece-rows", type=int, help="StreamingPairDataset(piece_rows=...) (default: the package's)")
+    ap.add_argument("--readahead", type=int, help="StreamingPairDataset(readahead=...) (default: the package's)")
     ap.add_argument("--repeat", type=int, default=1)
     args = ap.parse_args()
     if args.package:

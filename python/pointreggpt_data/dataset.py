@@ -197,6 +197,7 @@ class Dataset:
         self.footer_cache = max(1, int(footer_cache))
         self._footers = OrderedDict()
         self._lock = threading.Lock()
+        self._copying = {}
         header = self._read_header()
         self.schema_version = header.get("schema_version", "")
         self.config_hash = header.get("config_hash", "")
@@ -286,12 +287,14 @@ class Dataset:
             s._fragment = None
             s._groups = None
         self._lock = threading.Lock()  # a lock held by a thread of the parent at the fork would never be released
+        self._copying = {}
         self._pid = os.getpid()
 
     def __getstate__(self):
         state = dict(self.__dict__)
         state["_footers"] = OrderedDict()  # parsed footers stay in the process that read them
         state["_lock"] = None
+        state["_copying"] = {}
         return state
 
     def __setstate__(self, state):
@@ -331,32 +334,47 @@ class Dataset:
             return pafs.LocalFileSystem(), self.cached_copy(shard)
         return self.filesystem, shard.path
 
+    def _copy_path(self, shard):
+        name = shard.blake3 or hashlib.sha256(self.url.encode()).hexdigest()[:16] + "-" + posixpath.basename(shard.path)[:-8]
+        return os.path.join(self.cache_dir, name + ".parquet")
+
+    @staticmethod
+    def _complete(shard, path):
+        want = shard.entry.get("bytes")
+        return os.path.exists(path) and (want is None or os.path.getsize(path) == int(want))
+
     def cached_copy(self, shard):
         """The path of the shard's local copy in ``cache_dir``, downloaded first if it is not there (whole,
-        in 8 MB reads, into a temporary name renamed when complete: concurrent readers never see a partial
-        file). Named by the manifest's blake3 and checked against its byte count."""
-        name = shard.blake3 or hashlib.sha256(self.url.encode()).hexdigest()[:16] + "-" + posixpath.basename(shard.path)[:-8]
-        name += ".parquet"
-        path = os.path.join(self.cache_dir, name)
+        in ranged reads of 64 MB, into a temporary name renamed when complete: concurrent readers never see
+        a partial file; one download per shard per process). Named by the manifest's blake3 and checked
+        against its byte count."""
+        path = self._copy_path(shard)
         want = shard.entry.get("bytes")
-        if os.path.exists(path) and (want is None or os.path.getsize(path) == int(want)):
+        if self._complete(shard, path):
             return path
+        with self._lock:  # one download per shard in this process, however many threads ask for it
+            lock = self._copying.setdefault(shard.index, threading.Lock())
+        with lock:
+            if not self._complete(shard, path):
+                self._download(shard, path, want)
+        return path
+
+    def _download(self, shard, path, want):
         os.makedirs(self.cache_dir, exist_ok=True)
         tmp = f"{path}.{os.getpid()}-{threading.get_ident()}.part"
         try:
-            with self.filesystem.open_input_stream(shard.path) as src, open(tmp, "wb") as dst:
-                while True:
-                    block = src.read(8 << 20)
-                    if not block:
-                        break
+            with self.filesystem.open_input_file(shard.path) as src, open(tmp, "wb") as dst:
+                size, done = src.size(), 0
+                while done < size:  # ranged reads of 64 MB (an input stream's reads would be many small requests)
+                    block = src.read_at(min(64 << 20, size - done), done)
                     dst.write(block)
+                    done += len(block)
             if want is not None and os.path.getsize(tmp) != int(want):
                 raise DatasetError(f"{shard.path}: copied {os.path.getsize(tmp)} bytes, the manifest says {want}")
             os.replace(tmp, path)
         finally:
             if os.path.exists(tmp):
                 os.remove(tmp)
-        return path
 
     def footer(self, shard, copy=True):
         """The shard's parsed Parquet footer (``pyarrow.parquet.FileMetaData``), read once per process and
@@ -367,7 +385,10 @@ class Dataset:
             if meta is not None:
                 self._footers.move_to_end(shard.index)
                 return meta
-        fs, path = self._source(shard, copy)
+        # From the local copy when there is one; never a reason to download the whole shard (its footer
+        # is the store's, byte for byte).
+        local = self._copy_path(shard) if copy and self.remote and self.cache_dir is not None else None
+        fs, path = (pafs.LocalFileSystem(), local) if local and self._complete(shard, local) else (self.filesystem, shard.path)
         with fs.open_input_file(path) as f:
             meta = pq.ParquetFile(f).metadata
         with self._lock:
@@ -390,9 +411,16 @@ class Dataset:
         names = meta.schema.to_arrow_schema().names
         cols = [c for c in columns if c in names]
         fs, path = self._source(shard, copy)
+        groups = list(groups)
+        if fs is self.filesystem and self.remote and len(groups) == meta.num_row_groups:
+            # Every row group of a shard on an object store: the whole object in one request (a shard is
+            # tens of MB; one GET instead of a few ranged ones per row group and column run).
+            with fs.open_input_file(path) as f:  # read_at: one request (an input stream's read() makes many)
+                data = pa.BufferReader(f.read_at(f.size(), 0))
+            return pq.ParquetFile(data, metadata=meta).read_row_groups(groups, columns=cols, use_threads=False)
         with fs.open_input_file(path) as f:
             reader = pq.ParquetFile(f, metadata=meta, pre_buffer=self.remote and fs is self.filesystem)
-            return reader.read_row_groups(list(groups), columns=cols, use_threads=False)
+            return reader.read_row_groups(groups, columns=cols, use_threads=False)
 
     def read_group(self, shard, group, columns, copy=True):
         """As ``read_groups`` for one row group."""

@@ -76,7 +76,7 @@ class PairDataset(_Base):
     every one; ``MINIMAL_FIELDS`` = the two clouds and the pose; ``unit_index`` always): only their
     columns are read and decoded, never the depth PNGs. ``columns``: more stored columns to return, as
     Python values (e.g. ``["source_intrinsics"]``). ``cache_groups``: decoded row groups kept per process
-    (8 by default; ``cache_shards`` is its old name).
+    (16 by default; ``cache_shards`` is its old name).
 
     An item reads and decodes its whole row group (at most the build's ``output.row_group_rows`` pairs, 16
     by default), through the shard's footer read once per process (``Dataset.footer``), and keeps it: a
@@ -86,7 +86,7 @@ class PairDataset(_Base):
     """
 
     def __init__(self, dataset, status="ok", scene=None, overlap_source=None, overlap_target=None, where=None,
-                 tensors=False, columns=(), cache_groups=8, storage_options=None, fields=None, cache_shards=None):
+                 tensors=False, columns=(), cache_groups=16, storage_options=None, fields=None, cache_shards=None):
         if tensors and _torch is None:
             raise ImportError("PairDataset(tensors=True) needs torch (pip install torch)")
         self.dataset = dataset if hasattr(dataset, "shards") else open_dataset(dataset, storage_options=storage_options)
@@ -210,16 +210,18 @@ class StreamingPairDataset(_IterBase):
     to a piece: with DistributedDataParallel, end the epoch on the shortest rank (e.g.
     ``torch.distributed.algorithms.join.Join``) or drop the remainder.
 
-    ``readahead``: pieces each consumer reads ahead on background threads (reading and decoding release
-    the GIL; default 2 for a folder, 8 for an object store, whose latency it hides); 0 reads in the
-    consuming thread. Call ``set_epoch(e)`` before each epoch's iteration (with
+    ``piece_rows``: the rows of a piece (default 16; on an object store without ``cache_dir``, whole
+    shards: one request per shard, read whole; memory then about 3 shards' pair columns per consumer, and
+    a consumer's pairs come shard by shard, mixed by the buffer). ``readahead``: pieces each consumer
+    reads ahead on background threads (reading and decoding release the GIL; default 2, or 8 on an object
+    store with ``cache_dir``, whose first reads fetch whole shards); 0 reads in the consuming thread. Call ``set_epoch(e)`` before each epoch's iteration (with
     ``persistent_workers=False``, the default, each epoch's workers receive the new epoch). Selection
     arguments and ``fields`` as ``PairDataset``.
     """
 
     def __init__(self, dataset, status="ok", scene=None, overlap_source=None, overlap_target=None, where=None,
                  tensors=False, columns=(), shuffle=True, buffer_size=256, seed=0, rank=None, world_size=None,
-                 storage_options=None, fields=None, readahead=None, piece_rows=16):
+                 storage_options=None, fields=None, readahead=None, piece_rows=None):
         if tensors and _torch is None:
             raise ImportError("StreamingPairDataset(tensors=True) needs torch (pip install torch)")
         if buffer_size < 1:
@@ -233,7 +235,13 @@ class StreamingPairDataset(_IterBase):
         self.seed = int(seed)
         self.epoch = 0
         self.rank, self.world_size = rank, world_size
-        self.readahead = (8 if self.dataset.remote else 2) if readahead is None else int(readahead)
+        # On an object store without a local copy, whole shards: one request each (ranged reads of row
+        # groups cost a request per group and column run, which a store's latency, or a local S3 server's
+        # per-request cost, makes the limit); elsewhere runs of row groups of at most 16 rows.
+        whole = self.dataset.remote and self.dataset.cache_dir is None
+        if piece_rows is None:
+            piece_rows = 1 << 62 if whole else 16
+        self.readahead = (2 if whole else 8 if self.dataset.remote else 2) if readahead is None else int(readahead)
         self._filter = selection_expression(status, scene, overlap_source, overlap_target, where)
         #: (shard position, (row groups...)) of every piece: consecutive row groups of one shard holding at
         #: most ``piece_rows`` rows (or one group), in file order.
@@ -330,20 +338,22 @@ class GroupShuffleSampler:
     ranks (``rank``/``world_size``, default ``torch.distributed``'s when initialized: every pair exactly
     once per epoch across ranks, whose counts differ by up to a row group); a rank's groups are dealt to
     ``num_workers`` lanes (one per DataLoader worker, 1 for ``num_workers=0``); each lane takes ``mix``
-    groups at a time and yields their pairs in a random order; and the lanes are interleaved ``batch_size``
-    items at a time, the order in which a DataLoader deals batches to its workers, so that the pairs of a
-    group reach the worker that decoded it (``PairDataset`` keeps the last ``cache_groups`` groups; give it
-    at least ``2 * mix``).
+    groups at a time (a window) and yields their pairs in a random order; and the lanes are interleaved
+    ``batch_size`` items at a time, the order in which a DataLoader deals batches to its workers, so that
+    the pairs of a group reach the worker that decoded it. ``PairDataset`` keeps the last ``cache_groups``
+    decoded groups (16 by default): give it at least ``mix + 1``.
 
-    What it does to randomness: the order of the groups is uniform over the epoch, but a batch holds pairs
-    of about ``max(1, mix * group_rows / batch_size)`` ... ``mix + 1`` groups only, and the pairs of a group are
-    consecutive units (with ``samples_per_frame`` ≥ the group's rows, the samples of one source frame), so
-    the pairs within a batch are correlated; a larger ``mix`` (or smaller row groups) spreads a batch over
-    more groups at the cost of a larger cache. A fully random order (``RandomSampler``) decodes a row group
-    per pair. ``set_epoch(e)`` changes the order.
+    What it does to randomness: every pair once per epoch and the order of the groups uniform, but a
+    batch draws its pairs from the ``mix`` groups of one window (with ``mix`` ≥ the batch size, mostly
+    one pair per group), and a window's pairs come out within ``mix × group rows`` places of each other.
+    The pairs of a group are consecutive units (with ``samples_per_frame`` ≥ the group's rows, samples of
+    one source frame), so ``mix=1`` puts the samples of one frame together in a batch; the default 8
+    spreads a batch of 8 over about 8 groups for a cache of 16 decoded groups per worker (~70 MB with
+    16-row groups). A fully random order (``RandomSampler``) decodes a whole row group for every pair.
+    ``set_epoch(e)`` changes the order.
     """
 
-    def __init__(self, dataset, batch_size=1, num_workers=0, mix=1, seed=0, rank=None, world_size=None):
+    def __init__(self, dataset, batch_size=1, num_workers=0, mix=8, seed=0, rank=None, world_size=None):
         self.dataset = dataset
         self.batch_size = max(1, int(batch_size))
         self.lanes = max(1, int(num_workers))
@@ -451,53 +461,76 @@ def collate(samples):
     first = samples[0]
     as_torch = _torch is not None and any(isinstance(v, _torch.Tensor) for v in first.values())
     to_np = (lambda x: x.numpy()) if as_torch else np.asarray
-    out = {}
+    # Each array of the batch as (key, dtype, shape, fill): made in one pass once every size is known,
+    # so that in a DataLoader worker they can all be written straight into one shared-memory block.
+    plan, out = [], {}
+    n = len(samples)
     for cloud in ("source", "target"):
         if f"{cloud}_points" not in first:  # not among the dataset's fields
             continue
         lengths = np.array([len(s[f"{cloud}_points"]) for s in samples], dtype=np.int64)
-        out[f"{cloud}_lengths"] = lengths
-        out[f"{cloud}_batch"] = np.repeat(np.arange(len(samples), dtype=np.int64), lengths)
+        plan.append((f"{cloud}_lengths", np.int64, (n,), lambda o, v=lengths: np.copyto(o, v)))
+        plan.append((f"{cloud}_batch", np.int64, (int(lengths.sum()),),
+                     lambda o, v=lengths: np.copyto(o, np.repeat(np.arange(n, dtype=np.int64), v))))
     for field, _ in _POINT_FIELDS:
         if field not in first:
             continue
         values = [s.get(field) for s in samples]
         if any(v is None for v in values):
             out[field] = None
-        else:
-            out[field] = np.concatenate([to_np(v) for v in values], axis=0)
+            continue
+        values = [to_np(v) for v in values]
+        shape = (sum(len(v) for v in values),) + values[0].shape[1:]
+        plan.append((field, values[0].dtype, shape, lambda o, v=values: np.concatenate(v, axis=0, out=o)))
     if "T_target_from_source" in first:
-        out["T_target_from_source"] = np.stack([to_np(s["T_target_from_source"]) for s in samples]).astype(np.float64, copy=False)
+        values = [to_np(s["T_target_from_source"]) for s in samples]
+        plan.append(("T_target_from_source", np.float64, (n, 4, 4), lambda o, v=values: np.stack(v, out=o)))
     for field in ("overlap_source", "overlap_target"):
         if field in first:
-            out[field] = np.array([s[field] for s in samples], dtype=np.float64)
+            plan.append((field, np.float64, (n,), lambda o, f=field: np.copyto(o, [s[f] for s in samples])))
     if "unit_index" in first:
-        out["unit_index"] = np.array([s["unit_index"] for s in samples], dtype=np.int64)
+        plan.append(("unit_index", np.int64, (n,), lambda o: np.copyto(o, [s["unit_index"] for s in samples])))
+    in_worker = as_torch and _torch.utils.data.get_worker_info() is not None  # the batch goes to another process
+    arrays = _shared_arrays(plan) if in_worker else [np.empty(shape, dtype) for _, dtype, shape, _ in plan]
+    for (key, _, _, fill), array in zip(plan, arrays):
+        fill(array)
+        out[key] = array
     if as_torch:
-        keys = [k for k, v in out.items() if isinstance(v, np.ndarray)]
-        in_worker = _torch.utils.data.get_worker_info() is not None  # the batch goes to another process
-        tensors = _one_storage([out[k] for k in keys]) if in_worker else [_torch.from_numpy(out[k]) for k in keys]
-        out.update(zip(keys, tensors))
+        keys = [key for key, _, _, _ in plan]
+        out.update((k, out[k] if isinstance(out[k], _torch.Tensor) else _torch.from_numpy(out[k])) for k in keys)
+        if in_worker:
+            out.update(zip(keys, arrays.tensors))
     for field in samples[0]:
         if field not in out:
             out[field] = [s[field] for s in samples]
     return out
 
 
-def _one_storage(arrays):
-    """Torch tensors equal to ``arrays``, all views of one storage. A DataLoader worker sends each storage
-    of a batch through its own shared-memory segment; one storage instead of eleven made streaming into 2
-    workers 1.5x as fast (docs/lab/2026-12-06-row-groups-and-scale.md). In the main process the copy only
-    costs, so ``collate`` uses it in workers."""
+class _SharedArrays(list):
+    """numpy views of one shared-memory block, with the torch tensors over the same bytes (``tensors``)."""
+
+
+def _shared_arrays(plan):
+    """Empty arrays of ``plan``'s dtypes and shapes, all in one block of shared memory (8-byte aligned
+    views), for a batch a DataLoader worker sends to the main process: torch sends a storage that is
+    already shared as its handle, without copying it, and one block costs one segment instead of one per
+    array. Streaming into 2 workers was 1.5x as fast with one storage
+    (docs/lab/2026-12-06-row-groups-and-scale.md); writing the batch into shared memory directly saves
+    the copy that sharing made on top."""
     offsets, total = [], 0
-    for a in arrays:
+    for _, dtype, shape, _ in plan:
         offsets.append(total)
-        total += (a.nbytes + 7) // 8 * 8  # every view starts 8-byte aligned
-    buffer = np.empty(total, dtype=np.uint8)
-    for a, o in zip(arrays, offsets):
-        buffer[o:o + a.nbytes] = np.ascontiguousarray(a).reshape(-1).view(np.uint8)
-    flat = _torch.from_numpy(buffer)
-    return [flat[o:o + a.nbytes].view(_TORCH_DTYPES[a.dtype]).reshape(a.shape) for a, o in zip(arrays, offsets)]
+        total += (int(np.prod(shape, dtype=np.int64)) * np.dtype(dtype).itemsize + 7) // 8 * 8
+    flat = _torch.empty(0, dtype=_torch.uint8)
+    flat.set_(_torch.UntypedStorage._new_shared(max(total, 8)))
+    out = _SharedArrays()
+    out.tensors = []
+    for (_, dtype, shape, _), o in zip(plan, offsets):
+        size = int(np.prod(shape, dtype=np.int64)) * np.dtype(dtype).itemsize
+        t = flat[o:o + size].view(_TORCH_DTYPES[np.dtype(dtype)]).reshape(shape)
+        out.tensors.append(t)
+        out.append(t.numpy())
+    return out
 
 
 _TORCH_DTYPES = {np.dtype(t): getattr(_torch, t) for t in ("float32", "float64", "int64", "int8")} if _torch is not None else {}

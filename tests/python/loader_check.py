@@ -11,6 +11,8 @@ plan.json:
   scratch        a folder for the corrupted copy of the dataset
   ranks, workers distributed ranks (simulated: rank=, world_size=) x DataLoader workers
   buffer         the shuffle buffer bound to check
+  s3_endpoint    (optional) a local S3 server (moto): the dataset is uploaded there and checks 1-2 repeated
+                 for whole-shard streaming, reads through local copies (cache_dir=) and ranged random reads
 
 Checks, each an assertion (the script fails, never skips):
   1. every ok pair exactly once per epoch, two epochs, across ranks x DataLoader workers, for
@@ -121,9 +123,9 @@ def group_loader(ds, ranks, workers, mix, fields=None):
     return make
 
 
-def stream_loader(ds, ranks, workers, buffer):
+def stream_loader(ds, ranks, workers, buffer, piece_rows=7):
     def make(rank, epoch):
-        data = prd.StreamingPairDataset(ds, tensors=True, seed=5, rank=rank, world_size=ranks, buffer_size=buffer, readahead=3, piece_rows=7)
+        data = prd.StreamingPairDataset(ds, tensors=True, seed=5, rank=rank, world_size=ranks, buffer_size=buffer, readahead=3, piece_rows=piece_rows)
         data.set_epoch(epoch)
         return torch.utils.data.DataLoader(data, batch_size=4, collate_fn=prd.collate, num_workers=workers)
     return make
@@ -225,6 +227,56 @@ def buffer_bound(plan, ds):
     return {"largest_displacement": worst, "buffer": B}
 
 
+def upload(src, endpoint):
+    """The committed files of the folder dataset `src` into s3://loaders/ds on the local S3 server."""
+    import boto3
+
+    s3 = boto3.client("s3", endpoint_url=endpoint, aws_access_key_id="testing", aws_secret_access_key="testing", region_name="us-east-1")
+    s3.create_bucket(Bucket="loaders")
+    for sub in ("", "manifest", "shards"):
+        for name in sorted(os.listdir(os.path.join(src, sub))):
+            path = os.path.join(src, sub, name)
+            if os.path.isfile(path) and (sub or name == "dataset.toml"):
+                s3.upload_file(path, "loaders", "/".join(x for x in ("ds", sub, name) if x))
+    return "s3://loaders/ds", {"endpoint_url": endpoint, "access_key": "testing", "secret_key": "testing", "region": "us-east-1"}
+
+
+def object_store(plan, ok_units, ref):
+    """Checks 1 and 2 on a local S3 server: whole-shard streaming (the default there), streaming and
+    random access through local copies (cache_dir=), the copies complete and named by their blake3."""
+    url, opts = upload(plan["dataset"], plan["s3_endpoint"])
+    ranks, workers = plan["ranks"], plan["workers"]
+    report = {}
+    ds = prd.open_dataset(url, storage_options=opts)
+    assert ds.remote and len(ds.shards) == len(prd.open_dataset(plan["dataset"]).shards)
+    stream = prd.StreamingPairDataset(ds)
+    assert len(stream.pieces) == len(ds.shards), "whole shards on an object store without cache_dir"
+    seen, pairs = epochs_of(stream_loader(ds, ranks, workers, plan["buffer"], piece_rows=None), ranks)
+    check_once(seen, ok_units, "StreamingPairDataset on S3 (whole shards)")
+    for p in pairs:
+        check_pair(p, ref, "StreamingPairDataset on S3 (whole shards)")
+    report["stream_whole_shards_pairs"] = len(pairs)
+    cache = os.path.join(plan["scratch"], "s3-cache")
+    ds = prd.open_dataset(url, storage_options=opts, cache_dir=cache)
+    seen, pairs = epochs_of(stream_loader(ds, ranks, workers, plan["buffer"]), ranks)
+    check_once(seen, ok_units, "StreamingPairDataset on S3 with cache_dir")
+    for p in pairs:
+        check_pair(p, ref, "StreamingPairDataset on S3 with cache_dir")
+    copies = sorted(os.listdir(cache))
+    assert copies == sorted(s.blake3 + ".parquet" for s in ds.shards), f"the local copies are the shards, by blake3: {copies}"
+    for s in ds.shards:
+        assert os.path.getsize(os.path.join(cache, s.blake3 + ".parquet")) == s.entry["bytes"]
+    seen, pairs = epochs_of(group_loader(ds, ranks, workers, 1), ranks)
+    check_once(seen, ok_units, "GroupShuffleSampler on S3 with cache_dir")
+    for p in pairs:
+        check_pair(p, ref, "GroupShuffleSampler on S3 with cache_dir")
+    report["stream_cached_pairs"] = report["group_cached_pairs"] = len(pairs)
+    m = prd.PairDataset(prd.open_dataset(url, storage_options=opts))
+    for i in random.Random(2).sample(range(len(m)), min(20, len(m))):
+        check_pair(m[i], ref, "PairDataset on S3, ranged reads")
+    return report
+
+
 def main():
     plan = json.load(open(sys.argv[1]))
     ref_rows = pq.read_table(plan["reference"]).to_pylist()
@@ -240,6 +292,8 @@ def main():
     report["readers"] = readers(ds, plan, ok_units, ref)
     report["projection"] = projection(plan, ok_units, ref)
     report["buffer"] = buffer_bound(plan, ds)
+    if plan.get("s3_endpoint"):
+        report["s3"] = object_store(plan, ok_units, ref)
     print(json.dumps(report))
 
 

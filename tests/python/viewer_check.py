@@ -131,7 +131,7 @@ def main():
     t = made["target_points"].tolist()
     assert got == {"reprojected": [t[0], t[3]], "scene": [t[1]], "made_up": [t[2], t[4]]}, got
     assert not any(k.startswith("/images") for k in rec), "images logged for a pair without depth maps"
-    print(json.dumps({"pair": best["pair_key"], "counts": counts, "bytes": os.path.getsize(path)}))
+    print(json.dumps({"pair": best["pair_key"], "file": path, "counts": counts, "bytes": os.path.getsize(path)}))
 
 
 if __name__ == "__main__":
