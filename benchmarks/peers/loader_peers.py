@@ -119,7 +119,7 @@ def run(mode, args, prd, torch):
                 kw["readahead"] = args.readahead
             data = prd.StreamingPairDataset(open_ds(), tensors=True, seed=0, **kw)
             extra["pieces"] = len(data.pieces)
-            extra["readahead"] = data.readahead
+            extra["readahead"] = getattr(data, "readahead", None)  # None: a package version without read-ahead
             loader = torch.utils.data.DataLoader(data, batch_size=8, collate_fn=prd.collate, num_workers=workers)
         elif kind == "random":
             data = prd.PairDataset(open_ds(), tensors=True, **kw)

@@ -513,9 +513,11 @@ class DecodedShard:
     """Rows of pair columns (a shard, a row group) decoded once into flat numpy buffers; ``pair(i)``
     slices row ``i``. ``fields``: the pair fields to give (default every one of ``PAIR_FIELDS``); the
     table must hold their columns (``field_columns``), and may lack the provenance (version 1) or the
-    scene share (version 2). ``extra``: more columns, given as Python values."""
+    scene share (version 2). ``extra``: more columns, given as Python values. ``rows``: the rows to give
+    (``order``; default every one), e.g. those a filter selected (decoding them all and choosing costs less
+    than filtering the table's list columns)."""
 
-    def __init__(self, table, extra=(), fields=None):
+    def __init__(self, table, extra=(), fields=None, rows=None):
         self.n = table.num_rows
         self.fields = tuple(PAIR_FIELDS if fields is None else fields)
         want = set(self.fields)
@@ -560,11 +562,12 @@ class DecodedShard:
                 bad = [keys[i] for i in range(self.n) if len({int(o[i + 1] - o[i]) for o in aligned}) != 1]
                 raise DatasetError(f"provenance lists not aligned with target_points in pair(s) {bad[:5]}")
         self.extra = {c: table.column(c).to_pylist() for c in extra}
+        chosen = range(self.n) if rows is None else [int(r) for r in rows]
         if self.unit_index is not None:
-            self.order = sorted(range(self.n), key=lambda i: self.unit_index[i])
+            self.order = sorted(chosen, key=lambda i: self.unit_index[i])
             self.row_of = {u: i for i, u in enumerate(self.unit_index)}
         else:
-            self.order = list(range(self.n))
+            self.order = list(chosen)
             self.row_of = None
 
     def pair(self, i):

@@ -287,9 +287,12 @@ class StreamingPairDataset(_IterBase):
         if self._filter is not None:
             cols += [c for c in INDEX_COLUMNS if c not in cols]
         table = self.dataset.read_groups(shard, groups, cols)
-        if self._filter is not None:
-            table = table.filter(self._filter)
-        return DecodedShard(table, extra=self.columns, fields=self.fields)
+        rows = None
+        if self._filter is not None:  # the filter on the small columns only: filtering the table copies the clouds
+            small = table.select([c for c in INDEX_COLUMNS if c in table.column_names])
+            small = small.append_column("__row", _pa().array(np.arange(table.num_rows, dtype=np.int64)))
+            rows = small.filter(self._filter).column("__row").to_numpy()
+        return DecodedShard(table, extra=self.columns, fields=self.fields, rows=rows)
 
     def _decoded(self, pieces):
         if self.readahead <= 0:
