@@ -86,8 +86,11 @@ PY
   rm -rf "$W/s3cache"
   echo "  with cache_dir= (a local copy of each shard on first read): epoch 1 copies, epoch 2 reads the copies"
   "$PYTHON" "${PEERS[@]}" "$url" stream_2 --cache-dir "$W/s3cache" --repeat 2 | show
+  echo "  random access: ranged reads of a row group per item (group_2: each group once), then through the local copies"
   "$PYTHON" "${PEERS[@]}" "$url" group_2 | show
   "$PYTHON" "${PEERS[@]}" "$url" random_2 --limit 1000 | show
+  "$PYTHON" "${PEERS[@]}" "$url" group_2 --cache-dir "$W/s3cache" | show
+  "$PYTHON" "${PEERS[@]}" "$url" random_2 --cache-dir "$W/s3cache" --limit "$RANDOM_LIMIT" | show
   kill "$moto" 2>/dev/null || true
 fi
 
@@ -98,7 +101,7 @@ if part rowgroups; then
     build "$W/rg$g" "$RG_SIZE" --set "output.row_group_rows=$g"
     footer=$("$PYTHON" -c "import pyarrow.parquet as pq, glob; print(pq.ParquetFile(sorted(glob.glob('$W/rg$g/shards/*.parquet'))[0]).metadata.serialized_size)")
     t=$(now); "$BIN" query "$W/rg$g" "$Q" --format csv > /dev/null; ours=$(since "$t")
-    t=$(now); "$PYTHON" -c "import duckdb; duckdb.sql(\"select avg(len(target_points)) from read_parquet('$W/rg$g/shards/*.parquet')\").fetchall()"; duck=$(since "$t")
+    t=$(now); "$PYTHON" -c "import duckdb; duckdb.connect(config={'enable_progress_bar': False}).sql(\"select avg(len(target_points)) from read_parquet('$W/rg$g/shards/*.parquet')\").fetchall()"; duck=$(since "$t")
     echo "row_group_rows $g: $(du -sm "$W/rg$g/shards" | cut -f1) MB, footer $footer bytes, query $ours s (DuckDB over the files, a fresh process: $duck s)"
     "$PYTHON" "${PEERS[@]}" "$W/rg$g" peer stream_0 stream_2 group_2 | show
     "$PYTHON" "${PEERS[@]}" "$W/rg$g" random_0 random_2 --limit 1500 | show

@@ -402,19 +402,20 @@ class Dataset:
         meta = self.footer(shard)
         return [meta.row_group(g).num_rows for g in range(meta.num_row_groups)]
 
-    def read_groups(self, shard, groups, columns, copy=True):
+    def read_groups(self, shard, groups, columns, copy=True, whole=False):
         """The columns ``columns`` (those the shard has) of the row groups ``groups`` (a list, in that order)
         of one shard, every row: one open of the file with its cached footer, only those column chunks
         read and decoded (on an object store, pre-buffered: the chunks are fetched in a few concurrent,
-        coalesced requests). Safe to call from several threads at once."""
+        coalesced requests; ``whole``: the whole object in one request). Safe to call from several threads
+        at once."""
         meta = self.footer(shard, copy)
         names = meta.schema.to_arrow_schema().names
         cols = [c for c in columns if c in names]
         fs, path = self._source(shard, copy)
         groups = list(groups)
-        if fs is self.filesystem and self.remote and len(groups) == meta.num_row_groups:
-            # Every row group of a shard on an object store: the whole object in one request (a shard is
-            # tens of MB; one GET instead of a few ranged ones per row group and column run).
+        if whole and fs is self.filesystem and self.remote:
+            # ``whole``: on an object store, the whole object in one request (a shard is tens of MB; one
+            # GET instead of a few ranged ones per row group and column run), for a read of most of it.
             with fs.open_input_file(path) as f:  # read_at: one request (an input stream's read() makes many)
                 data = pa.BufferReader(f.read_at(f.size(), 0))
             return pq.ParquetFile(data, metadata=meta).read_row_groups(groups, columns=cols, use_threads=False)

@@ -286,7 +286,9 @@ class StreamingPairDataset(_IterBase):
         cols = _wanted(self.columns, self.fields)
         if self._filter is not None:
             cols += [c for c in INDEX_COLUMNS if c not in cols]
-        table = self.dataset.read_groups(shard, groups, cols)
+        ds = self.dataset  # a piece of every row group of a shard on an object store: one request for the object
+        whole = ds.remote and ds.cache_dir is None and len(groups) == len(ds.group_rows(shard))
+        table = ds.read_groups(shard, groups, cols, whole=whole)
         rows = None
         if self._filter is not None:  # the filter on the small columns only: filtering the table copies the clouds
             small = table.select([c for c in INDEX_COLUMNS if c in table.column_names])
