@@ -8,15 +8,17 @@
 #   SIZE=20000 benchmarks/scale.sh        (default 20000; the peak RSS is also taken at SIZE/10)
 #   SIZE=160000 SCALE_PARTS="build resume verify delta query loaders" benchmarks/scale.sh
 #                                         (the one-off run at the paper's size: the parts that fit one disk)
-# SCALE_PARTS (default: every part) picks among build resume kill verify delta query export loaders array
-# s3; every part after `build` reads the dataset it made (kept in SCALE_BENCH_DIR between runs).
+# SCALE_PARTS (default: every part) picks among build scene resume kill verify delta query export loaders
+# array s3; every part after `build` reads the dataset it made (kept in SCALE_BENCH_DIR between runs).
+# `scene` builds the same units with the scene-made targets (`scene` correction and fill, fallback min-pool
+# and no fill) and prints its pairs/s against the no-fill build of the same run (issue 49: at least half).
 # Needs a release build, the test peers (deltalake, polars, duckdb, torch, moto, pointreggpt_data) and the
 # real data (POINTREGGPT_REAL_DATA). Work folder: SCALE_BENCH_DIR (default: a temporary folder, removed).
 set -euo pipefail
 NAME="scale bench" KEEP=SCALE_BENCH_DIR
 source "$(dirname "$0")/lib.sh"
 SIZE="${SIZE:-20000}"
-PARTS=" ${SCALE_PARTS:-build resume kill verify delta query export loaders array s3} "
+PARTS=" ${SCALE_PARTS:-build scene resume kill verify delta query export loaders array s3} "
 FRAMES=400
 (( SIZE % FRAMES == 0 )) || { echo "scale bench: SIZE must be a multiple of $FRAMES" >&2; exit 1; }
 part() { [[ "$PARTS" == *" $1 "* ]]; }
@@ -39,6 +41,18 @@ if part build; then
   grep -E '^(ingest|pose|reproject|correct|inpaint|voxelize|validate|pack|sink)' "$W/ds.log" | sed 's/^/  /'
 fi
 [[ -d "$W/ds/manifest" ]] || { echo "scale bench: no dataset at $W/ds: run the build part first" >&2; exit 1; }
+
+if part scene; then # the scene-made targets on the same units: one fusion per 30 source frames
+  rm -rf "$W/scene"
+  SCENE=(--set 'correct.condition={ method = "scene", margin = 0.05, fallback = { method = "min_pool", threshold = 0.0375 } }'
+    --set 'correct.output={ method = "scene", margin = 0.05, fallback = { method = "min_pool", threshold = 0.0375 } }'
+    --set 'inpaint={ method = "scene", fallback = { method = "none" } }')
+  /usr/bin/time -v "$BIN" --threads 2 build "$CONFIG" "${SETS[@]}" "${SCENE[@]}" --out "$W/scene" --no-progress --no-publish > "$W/scene.log" 2> "$W/scene.time"
+  nofill=$(grep -o '[0-9.]* pairs/s' "$W/ds.log" | cut -d' ' -f1); scene=$(grep -o '[0-9.]* pairs/s' "$W/scene.log" | cut -d' ' -f1)
+  echo "scene build: $scene pairs/s, $(grep -o 'scenes fused [0-9]*' "$W/scene.log"), peak RSS $(rss_mb "$W/scene.time") MB; $(awk -v a="$scene" -v b="$nofill" 'BEGIN { printf "%.2f", a / b }') x the no-fill build's $nofill pairs/s (target >= 0.5)"
+  grep -E '^(ingest|pose|reproject|scene|correct|inpaint|voxelize|validate|pack|sink)' "$W/scene.log" | sed 's/^/  /'
+  rm -rf "$W/scene"
+fi
 shards=$(committed "$W/ds")
 
 if part resume; then

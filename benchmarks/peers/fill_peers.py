@@ -11,6 +11,10 @@ Peers:
   on the CPU"), written from the paper's description of its fast pipeline.
 Every peer keeps the known pixels as they are (the exact-consistency rule of our fills).
 
+With scenes (`eval inpaint --scene --dump-views`: NNN_scene.npy beside a view, the scene's depth at the unknown
+pixels it sees), every peer also runs as the scene fill's fallback: `scene+<peer>` keeps the known and scene
+pixels and fills the rest, scored on the same unknown pixels as the peer alone.
+
 Our fills are scored from the outputs `eval inpaint --dump-views` writes beside the views (NNN_fill_<fill>.npy),
 with the same code as the peers; `--ours` only brings their timing. Two tables: each row on every pixel it
 fills (its coverage shown), and every row on the pixels all rows fill (IP-Basic leaves pixels far from any
@@ -213,8 +217,18 @@ def load_views(folder):
         arr = {n: np.load(os.path.join(folder, f"{i:03d}_{n}.npy")) for n in ("condition", "known", "captured")}
         fills = {f[len(f"{i:03d}_fill_"):-4]: np.load(os.path.join(folder, f))
                  for f in sorted(os.listdir(folder)) if f.startswith(f"{i:03d}_fill_") and f.endswith(".npy")}
+        scene_path = os.path.join(folder, f"{i:03d}_scene.npy")
+        v["scene"] = np.load(scene_path) if os.path.exists(scene_path) else None
         views.append((arr["condition"], arr["known"].astype(bool), arr["captured"], v, fills))
     return meta, views
+
+
+def after_scene(fn):
+    """`fn` as the scene fill's fallback: the scene's pixels join the known ones, `fn` fills the rest."""
+    def fill(cond, known, scene):
+        seen = scene > 0
+        return fn(np.where(seen, scene, cond).astype(np.float32), known | seen)
+    return fill
 
 
 def main():
@@ -232,15 +246,17 @@ def main():
     outputs = {}
     for name in sorted(views[0][4]):
         outputs["ours: " + name] = ([fills[name] for *_, fills in views], None)
+    with_scene = all(v["scene"] is not None for _, _, _, v, _ in views)
     for name, fn in PEERS:
-        outs, seconds = [], 0.0
-        for cond, known, g, v, _ in views:
-            t0 = time.perf_counter()
-            out = fn(cond, known)
-            out = np.where(known, cond, out).astype(np.float32)
-            seconds += time.perf_counter() - t0
-            outs.append(out)
-        outputs["peer: " + name] = (outs, seconds)
+        for scene in ([False, True] if with_scene else [False]):
+            outs, seconds = [], 0.0
+            for cond, known, g, v, _ in views:
+                t0 = time.perf_counter()
+                out = after_scene(fn)(cond, known, v["scene"]) if scene else fn(cond, known)
+                out = np.where(known, cond, out).astype(np.float32)
+                seconds += time.perf_counter() - t0
+                outs.append(out)
+            outputs[("peer: scene+" if scene else "peer: ") + name] = (outs, seconds)
     timing, theirs = {}, {}
     if args.ours:
         with open(args.ours) as f:

@@ -112,14 +112,20 @@ pub struct EvalInpaintArgs {
     /// Add the scene rows: the frames around each source frame (the [scene] window of the first --pipeline
     /// config, else the default: blocks of 30, reach 60, every 3rd frame, 1 cm TSDF) fused and ray-cast at
     /// the target pose, WITHOUT the target frame and --scene-exclude frames on each side of it. Rows: the
-    /// `scene` correction (min-pool where the scene saw nothing), and the fills `scene` (scene only),
+    /// `scene` correction (min-pool where the scene saw nothing; `scene&mp`: min-pool everywhere too), and
+    /// the fills `scene` (scene only),
     /// `scene+background`, `scene+push_pull`, `scene+nearest` (the fallback fills what the scene did not see).
     #[arg(long)]
     pub scene: bool,
     /// With --scene: frames on each side of the captured target frame held out of its scene (the target
-    /// frame itself always is).
-    #[arg(long, default_value_t = 15)]
+    /// frame itself always is). The default, 30 frames (1 s at 30 Hz), was chosen on redkitchen's tune
+    /// frames (docs/lab/2026-12-07-scene-targets.md).
+    #[arg(long, default_value_t = 30)]
     pub scene_exclude: usize,
+    /// With --scene: a TOML file with the [scene] window and volume (the keys of a build config's [scene]
+    /// section at its top level, e.g. `block = 2`, `reach = 3`, `every = 1` for key frames far apart).
+    #[arg(long)]
+    pub scene_config: Option<PathBuf>,
 }
 
 #[derive(Debug, clap::Args)]
@@ -157,6 +163,14 @@ pub struct EvalCorrectionArgs {
     /// 5-10x slower with 2 threads than with 1).
     #[arg(long, default_value_t = 1)]
     pub torch_threads: i32,
+    /// Add the `scene` correction rows: the posed sequence(s) the labels were made from (repeat for several;
+    /// matched by sequence name). Each label's scene fuses the frames around its reference frame (the
+    /// default [scene] window) WITHOUT its label window and --scene-exclude frames on each side.
+    #[arg(long)]
+    pub scene_sequence: Vec<PathBuf>,
+    /// With --scene-sequence: frames on each side of a label window held out of its scene.
+    #[arg(long, default_value_t = 30)]
+    pub scene_exclude: usize,
 }
 
 fn parse_tau(s: &str) -> std::result::Result<f32, String> {
@@ -185,7 +199,23 @@ fn run_correction(a: &EvalCorrectionArgs, out: &mut dyn Write) -> Result<()> {
         checkpoints.push(("U-Net, no augmentation".to_string(), p.clone()));
     }
     checkpoints.push(("U-Net + DepthAugment".to_string(), a.checkpoint.clone()));
-    let rows = evaluate_all(&set, &checkpoints, device, a.batch, &a.taus)?;
+    let mut rows = evaluate_all(&set, &checkpoints, device, a.batch, &a.taus)?;
+    if !a.scene_sequence.is_empty() {
+        use crate::correction::{CorrectionConfig, SceneRule};
+        use crate::training::correction::evaluate::{evaluate_scene, EvalRow};
+        let mut sequences = Vec::new();
+        for p in &a.scene_sequence {
+            sequences.extend(crate::sources::open_sequences(p, crate::sources::OpenOptions::default())?);
+        }
+        let config = crate::scene::SceneConfig::default();
+        let fallback = CorrectionConfig::OFFICIAL_MIN_POOL.build();
+        for everywhere in [false, true] {
+            let rule = SceneRule { margin: 0.05, fallback_everywhere: everywhere };
+            let (c, seen) = evaluate_scene(&set, &sequences, &config, rule, fallback.as_ref(), a.scene_exclude)?;
+            let method = format!("scene{} (saw {:.0}%)", if everywhere { "&min-pool" } else { "/min-pool" }, 100.0 * seen);
+            rows.push(EvalRow { method, tau_m: None, metrics: c.metrics() });
+        }
+    }
     let (px, drop) = set.pixel_counts();
     writeln!(
         out,
@@ -229,7 +259,15 @@ fn run_inpaint(a: &EvalInpaintArgs, out: &mut dyn Write) -> Result<()> {
         })
         .collect::<Result<Vec<_>>>()?;
     let working = pipelines.first().map(|(_, c)| c.working.clone()).unwrap_or_default();
-    let scene_config = pipelines.first().map(|(_, c)| c.scene.clone()).unwrap_or_default();
+    let scene_config = match &a.scene_config {
+        Some(p) => {
+            let text = std::fs::read_to_string(p).map_err(|e| Error::io(p, e))?;
+            let c: crate::scene::SceneConfig = toml::from_str(&text).map_err(|e| Error::config(p.display().to_string(), e.to_string()))?;
+            c.validate()?;
+            c
+        }
+        None => pipelines.first().map(|(_, c)| c.scene.clone()).unwrap_or_default(),
+    };
     let with_scene = a.scene || pipelines.iter().any(|(_, c)| c.uses_scene());
     let mut views = Vec::new();
     let mut scene_frames = 0usize;
@@ -283,6 +321,8 @@ fn run_inpaint(a: &EvalInpaintArgs, out: &mut dyn Write) -> Result<()> {
     ];
     if a.scene {
         corrections.push(NamedCorrector::new("scene", &CorrectionConfig::scene(CorrectionConfig::OFFICIAL_MIN_POOL)));
+        let both = CorrectionConfig::Scene { margin: 0.05, fallback: Box::new(CorrectionConfig::OFFICIAL_MIN_POOL), fallback_everywhere: true };
+        corrections.push(NamedCorrector::new("scene&mp", &both));
         let scene = |fallback: InpaintConfig| InpaintConfig::Scene { fallback: Box::new(fallback) };
         fills.push(NamedFill::new("scene", &scene(InpaintConfig::None {}))?);
         fills.push(NamedFill::new("scene+background", &scene(InpaintConfig::Background {}))?);
@@ -359,7 +399,8 @@ fn correction_name(c: &crate::correction::CorrectionConfig) -> String {
         C::MinPool { .. } => "min_pool".into(),
         C::Median { .. } => "median".into(),
         C::Unet { threshold, .. } => format!("unet@{threshold}"),
-        C::Scene { fallback, .. } => format!("scene/{}", correction_name(fallback)),
+        C::Scene { fallback, fallback_everywhere: false, .. } => format!("scene/{}", correction_name(fallback)),
+        C::Scene { fallback, fallback_everywhere: true, .. } => format!("scene&{}", correction_name(fallback)),
     }
 }
 

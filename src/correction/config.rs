@@ -30,23 +30,39 @@ pub enum CorrectionConfig {
     /// For posed sequences: the scene fused from the frames around the source frame (`[scene]`), ray-cast
     /// at the target pose, decides by the correction labels' rule (drop a pixel `margin` metres or more off
     /// the fused surface: τ_gt, official 0.05); where the scene saw no surface, and for frames without a
-    /// pose, `fallback` decides (any other method).
-    Scene { margin: f32, fallback: Box<CorrectionConfig> },
+    /// pose, `fallback` decides (any other method). With `fallback_everywhere`, the fallback also drops
+    /// pixels where the scene saw a surface (a pixel is dropped when either says so).
+    Scene {
+        margin: f32,
+        fallback: Box<CorrectionConfig>,
+        #[serde(default)]
+        fallback_everywhere: bool,
+    },
+}
+
+/// How a `scene` correction decides where the scene saw a surface ([`crate::scene::scene_keep_mask`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SceneRule {
+    /// Drop a pixel this far (metres) or more off the scene's surface.
+    pub margin: f32,
+    /// Also drop the pixels the fallback drops where the scene saw a surface.
+    pub fallback_everywhere: bool,
 }
 
 impl CorrectionConfig {
     /// The official hand-crafted filter: min-pool at 3.75 cm (reference §3.3).
     pub const OFFICIAL_MIN_POOL: CorrectionConfig = CorrectionConfig::MinPool { threshold: 0.0375 };
 
-    /// The scene method with the official label margin (τ_gt 0.05 m) over `fallback`.
+    /// The scene method with the official label margin (τ_gt 0.05 m) over `fallback`, the fallback only
+    /// where the scene saw nothing.
     pub fn scene(fallback: CorrectionConfig) -> CorrectionConfig {
-        CorrectionConfig::Scene { margin: 0.05, fallback: Box::new(fallback) }
+        CorrectionConfig::Scene { margin: 0.05, fallback: Box::new(fallback), fallback_everywhere: false }
     }
 
-    /// The scene's margin when the method is `scene`.
-    pub fn scene_margin(&self) -> Option<f32> {
+    /// The scene's rule when the method is `scene`.
+    pub fn scene_rule(&self) -> Option<SceneRule> {
         match self {
-            CorrectionConfig::Scene { margin, .. } => Some(*margin),
+            CorrectionConfig::Scene { margin, fallback_everywhere, .. } => Some(SceneRule { margin: *margin, fallback_everywhere: *fallback_everywhere }),
             _ => None,
         }
     }
@@ -73,7 +89,7 @@ impl CorrectionConfig {
     pub fn validate(&self, field: &str) -> crate::Result<()> {
         let bad = |m: &str| Err(crate::Error::config(field, m));
         match self {
-            CorrectionConfig::Scene { fallback, .. } if fallback.scene_margin().is_some() => bad("the fallback of `scene` must be another method"),
+            CorrectionConfig::Scene { fallback, .. } if fallback.scene_rule().is_some() => bad("the fallback of `scene` must be another method"),
             CorrectionConfig::Scene { margin, .. } if !(*margin > 0.0 && margin.is_finite()) => bad("margin must be a positive number of metres"),
             CorrectionConfig::Scene { fallback, .. } => fallback.validate(&format!("{field}.fallback")),
             CorrectionConfig::None {} => Ok(()),

@@ -12,7 +12,7 @@ pub mod unet;
 
 use crate::geometry::DepthMap;
 
-pub use config::CorrectionConfig;
+pub use config::{CorrectionConfig, SceneRule};
 pub use median::MedianFilter;
 pub use minpool::MinPoolFilter;
 pub use unet::UnetCorrector;

@@ -1,18 +1,20 @@
 //! What a scene decides about a target view, as pure functions: which re-projected pixels penetrate a
 //! surface (the correction labels' rule), and which unknown pixels it fills.
 
+use crate::correction::SceneRule;
 use crate::geometry::DepthMap;
 use crate::labels::label::keep_label;
 
 /// The keep mask of `depth` against the scene's depth `scene` seen from the same camera: where the scene
 /// has a surface, the rule that makes the correction labels (keep when `|depth − scene| < margin`: a pixel
 /// behind the fused surface by the margin or more penetrates it, one in front of it floats in space the
-/// scene saw empty); where it has none (never observed), `fallback`'s decision; pixels without depth are
-/// kept (nothing to drop).
-pub fn scene_keep_mask(depth: &DepthMap, scene: &DepthMap, margin: f32, fallback: &[bool]) -> Vec<bool> {
-    let label = keep_label(depth, scene, margin);
+/// scene saw empty), and with `fallback_everywhere` also `fallback`'s decision; where it has none (never
+/// observed), `fallback`'s decision; pixels without depth are kept (nothing to drop).
+pub fn scene_keep_mask(depth: &DepthMap, scene: &DepthMap, rule: SceneRule, fallback: &[bool]) -> Vec<bool> {
+    let label = keep_label(depth, scene, rule.margin);
     let (d, s) = (depth.data(), scene.data());
-    (0..d.len()).map(|i| if d[i] <= 0.0 { true } else if s[i] > 0.0 { label[i] } else { fallback[i] }).collect()
+    let seen = |i: usize| label[i] && (fallback[i] || !rule.fallback_everywhere);
+    (0..d.len()).map(|i| if d[i] <= 0.0 { true } else if s[i] > 0.0 { seen(i) } else { fallback[i] }).collect()
 }
 
 /// The scene fill of a view: every unknown pixel where the scene has a surface gets the scene's depth;
@@ -40,7 +42,11 @@ mod tests {
         let depth = DepthMap::new(6, 1, vec![0.0, 2.01, 2.1, 1.9, 3.0, 3.0]).unwrap();
         let scene = DepthMap::new(6, 1, vec![2.0, 2.0, 2.0, 2.0, 0.0, 0.0]).unwrap();
         let fallback = [false, false, true, true, true, false];
-        assert_eq!(scene_keep_mask(&depth, &scene, 0.05, &fallback), vec![true, true, false, false, true, false]);
+        let rule = SceneRule { margin: 0.05, fallback_everywhere: false };
+        assert_eq!(scene_keep_mask(&depth, &scene, rule, &fallback), vec![true, true, false, false, true, false]);
+        // The fallback everywhere: pixel 1 (on the surface) is dropped too, by the fallback.
+        let rule = SceneRule { fallback_everywhere: true, ..rule };
+        assert_eq!(scene_keep_mask(&depth, &scene, rule, &fallback), vec![true, false, false, false, true, false]);
     }
 
     #[test]

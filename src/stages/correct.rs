@@ -2,7 +2,7 @@
 //! the `[correct]` config section naming the method for each.
 
 use super::PairUnit;
-use crate::correction::{apply_keep_mask, CorrectionConfig, Corrector};
+use crate::correction::{apply_keep_mask, CorrectionConfig, Corrector, SceneRule};
 use crate::error::Result;
 use crate::geometry::DepthMap;
 use crate::runtime::Stage;
@@ -37,12 +37,12 @@ impl CorrectConfig {
             Target::Condition => &self.condition,
             Target::Output => &self.output,
         };
-        Correct { target, corrector: method.build(), scene_margin: method.scene_margin() }
+        Correct { target, corrector: method.build(), scene_rule: method.scene_rule() }
     }
 
     /// Whether either correction is `scene`.
     pub fn uses_scene(&self) -> bool {
-        self.condition.scene_margin().is_some() || self.output.scene_margin().is_some()
+        self.condition.scene_rule().is_some() || self.output.scene_rule().is_some()
     }
 }
 
@@ -59,8 +59,8 @@ pub struct Correct {
     pub target: Target,
     /// The method's corrector (for `scene`, its fallback's).
     pub corrector: Box<dyn Corrector>,
-    /// For `scene`: the margin of the scene's rule, applied where the unit has a scene.
-    pub scene_margin: Option<f32>,
+    /// For `scene`: the scene's rule, applied where the unit has a scene.
+    pub scene_rule: Option<SceneRule>,
 }
 
 impl Stage<PairUnit> for Correct {
@@ -72,7 +72,7 @@ impl Stage<PairUnit> for Correct {
     }
 
     fn process(&mut self, unit: &mut PairUnit) -> Result<()> {
-        let scene = self.scene_margin.and_then(|m| unit.scene_depth.as_ref().map(|s| (s, m)));
+        let scene = self.scene_rule.and_then(|r| unit.scene_depth.as_ref().map(|s| (s, r)));
         match self.target {
             Target::Condition => {
                 let depth = unit.condition.as_mut().expect("reproject sets the condition");
@@ -85,24 +85,24 @@ impl Stage<PairUnit> for Correct {
 }
 
 /// The pixels of `depth` to keep: `corrector`'s mask, or, given a scene (its depth from the same camera
-/// and the rule's margin), the scene's decision where it has a surface ([`scene_keep_mask`]).
-pub fn keep_mask(corrector: &dyn Corrector, scene: Option<(&DepthMap, f32)>, depth: &DepthMap) -> Vec<bool> {
+/// and its rule), the scene's decision where it has a surface ([`scene_keep_mask`]).
+pub fn keep_mask(corrector: &dyn Corrector, scene: Option<(&DepthMap, SceneRule)>, depth: &DepthMap) -> Vec<bool> {
     let keep = corrector.keep_mask(depth);
     match scene {
-        Some((scene, margin)) => scene_keep_mask(depth, scene, margin, &keep),
+        Some((scene, rule)) => scene_keep_mask(depth, scene, rule, &keep),
         None => keep,
     }
 }
 
 /// Drops the penetrating pixels of a re-projected condition ([`keep_mask`]): their depth becomes 0 and
 /// they turn unknown.
-pub fn correct_condition(corrector: &dyn Corrector, scene: Option<(&DepthMap, f32)>, depth: &mut DepthMap, known: &mut [bool]) {
+pub fn correct_condition(corrector: &dyn Corrector, scene: Option<(&DepthMap, SceneRule)>, depth: &mut DepthMap, known: &mut [bool]) {
     let keep = keep_mask(corrector, scene, depth);
     apply_keep_mask(depth, known, &keep);
 }
 
 /// Drops the pixels of an inpainted output that [`keep_mask`] rejects (their depth becomes 0).
-pub fn correct_output(corrector: &dyn Corrector, scene: Option<(&DepthMap, f32)>, depth: &mut DepthMap) {
+pub fn correct_output(corrector: &dyn Corrector, scene: Option<(&DepthMap, SceneRule)>, depth: &mut DepthMap) {
     let keep = keep_mask(corrector, scene, depth);
     let mut all = vec![true; keep.len()];
     apply_keep_mask(depth, &mut all, &keep);

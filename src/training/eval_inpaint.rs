@@ -72,20 +72,20 @@ pub struct NamedCorrector {
     pub name: String,
     /// The method's corrector (for `scene`, its fallback's).
     pub corrector: Box<dyn Corrector>,
-    /// For `scene`: the margin of the scene's rule, applied where the view has a scene.
-    pub scene_margin: Option<f32>,
+    /// For `scene`: the scene's rule, applied where the view has a scene.
+    pub scene_rule: Option<crate::correction::SceneRule>,
 }
 
 impl NamedCorrector {
-    /// `config` under `name` (the scene's margin when it is `scene`).
+    /// `config` under `name` (with the scene's rule when it is `scene`).
     pub fn new(name: impl Into<String>, config: &crate::correction::CorrectionConfig) -> Self {
-        NamedCorrector { name: name.into(), corrector: config.build(), scene_margin: config.scene_margin() }
+        NamedCorrector { name: name.into(), corrector: config.build(), scene_rule: config.scene_rule() }
     }
 
     /// A view's condition and known mask after this correction.
     fn apply(&self, v: &View) -> (DepthMap, Vec<bool>) {
         let (mut condition, mut known) = (v.condition.clone(), v.known.clone());
-        let scene = self.scene_margin.and_then(|m| v.scene.as_ref().map(|s| (s, m)));
+        let scene = self.scene_rule.and_then(|r| v.scene.as_ref().map(|s| (s, r)));
         let keep = keep_mask(self.corrector.as_ref(), scene, &condition);
         apply_keep_mask(&mut condition, &mut known, &keep);
         (condition, known)

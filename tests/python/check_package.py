@@ -10,8 +10,9 @@ plan.json:
   env              (S3) environment variables with which the dataset is opened a second time without options
   reference        a Parquet file written by `pointreggpt query ... --format parquet`: every row, unit order,
                    columns unit_index, pair_key, scene, status, seed, t_target_from_source, source_points,
-                   target_points, overlap_source, overlap_target (+ target_known_share, target_view in version 2)
-  schema_version   "pairs/2" or "pairs/1"
+                   target_points, overlap_source, overlap_target (+ target_known_share, target_view from version 2,
+                   target_scene_share in version 3)
+  schema_version   "pairs/3", "pairs/2" or "pairs/1"
   shards           the number of committed shards (manifest entries)
   filters          [{"kwargs": {...selection arguments...}, "where": python expression over `pc` or null,
                      "keys": [pair keys `pointreggpt query` selects with the same predicate, in unit order]}]
@@ -68,17 +69,20 @@ def as_f32(values):
 def reference_rows(path, version):
     """The rows of `pointreggpt query`, decoded without the package (to_pylist)."""
     t = pq.read_table(path)
-    want_types = {"pairs/2": (pa.int64(), pa.int64()), "pairs/1": (pa.uint64(), pa.uint64())}[version]
+    want_types = {"pairs/3": (pa.int64(), pa.int64()), "pairs/2": (pa.int64(), pa.int64()), "pairs/1": (pa.uint64(), pa.uint64())}[version]
     assert (t.schema.field("unit_index").type, t.schema.field("seed").type) == want_types, t.schema
-    assert ("target_known_share" in t.column_names) == (version == "pairs/2"), t.column_names
+    assert ("target_known_share" in t.column_names) == (version != "pairs/1"), t.column_names
+    assert ("target_scene_share" in t.column_names) == (version == "pairs/3"), t.column_names
     rows = []
     for r in t.to_pylist():
         r["source_points"] = as_f32(r["source_points"]).reshape(-1, 3)
         r["target_points"] = as_f32(r["target_points"]).reshape(-1, 3)
         r["T"] = np.array(r["t_target_from_source"], dtype=np.float64).reshape(4, 4)
-        if version == "pairs/2":
+        if version != "pairs/1":
             r["target_known_share"] = as_f32(r["target_known_share"])
             r["target_view"] = np.array(r["target_view"], dtype=np.int8)
+            # Version 2 had no scene: its scene shares read as 0, one per point.
+            r["target_scene_share"] = as_f32(r["target_scene_share"]) if version == "pairs/3" else np.zeros(len(r["target_known_share"]), np.float32)
         rows.append(r)
     return rows
 
@@ -95,19 +99,20 @@ def check_pair(p, r, version, where):
     assert (p["scene"], p["status"], p["unit_index"]) == (r["scene"], r["status"], r["unit_index"]), f"{where} {key}"
     assert type(p["seed"]) is int and 0 <= p["seed"] <= U64, f"{where} {key}: seed {p['seed']!r}"
     assert p["seed"] == r["seed"] & U64, f"{where} {key}: seed {p['seed']} vs stored {r['seed']}"
-    if version == "pairs/2" and r["seed"] < 0:
+    if version != "pairs/1" and r["seed"] < 0:
         assert p["seed"] >= 1 << 63, "a negative stored seed is an unsigned seed >= 2**63"
     src, tgt, T = (np.asarray(p[k]) for k in ("source_points", "target_points", "T_target_from_source"))
     assert same_bits(src, r["source_points"]), f"{where} {key}: source points"
     assert same_bits(tgt, r["target_points"]), f"{where} {key}: target points"
     assert same_bits(T, r["T"]), f"{where} {key}: transform"
     assert p["overlap_source"] == r["overlap_source"] and p["overlap_target"] == r["overlap_target"], f"{where} {key}: overlaps"
-    if version == "pairs/2":
+    if version != "pairs/1":
         assert same_bits(np.asarray(p["target_known_share"]), r["target_known_share"]), f"{where} {key}: target_known_share"
+        assert same_bits(np.asarray(p["target_scene_share"]), r["target_scene_share"]), f"{where} {key}: target_scene_share"
         assert same_bits(np.asarray(p["target_view"]), r["target_view"]), f"{where} {key}: target_view"
         assert len(r["target_view"]) == len(r["target_points"])
     else:
-        assert p["target_known_share"] is None and p["target_view"] is None, f"{where} {key}: a version-1 pair has no provenance"
+        assert p["target_known_share"] is None and p["target_scene_share"] is None and p["target_view"] is None, f"{where} {key}: a version-1 pair has no provenance"
 
 
 def selection(f):
@@ -219,7 +224,7 @@ def check_bytes_read(path):
     small = chunk_bytes(files, ["unit_index", "pair_key", "overlap_source"])
     assert index_bytes == small, f"selecting rows read {index_bytes} bytes, its three columns are {small}"
     want_pairs = chunk_bytes(files, ["unit_index", "pair_key", "scene", "status", "seed", "t_target_from_source", "source_points",
-                                     "target_points", "target_known_share", "target_view", "overlap_source", "overlap_target"])
+                                     "target_points", "target_known_share", "target_scene_share", "target_view", "overlap_source", "overlap_target"])
     # Reads of neighbouring chunks are merged across holes below 8 KiB (pyarrow's pre-buffering), so a
     # few small columns between them may be read too, never a PNG column (the smallest is larger).
     assert want_pairs <= pair_bytes < want_pairs + chunk_bytes(files, ["known_mask_png"]), f"pairs() read {pair_bytes} bytes, its columns are {want_pairs}"
@@ -264,8 +269,8 @@ def check_loader(ds, kwargs, by_key, version, workers):
             assert same_bits(b["T_target_from_source"][j].numpy(), r["T"]), f"loader {key}: transform"
             assert b["overlap_source"][j].item() == r["overlap_source"] and b["seed"][j] == r["seed"] & U64
             assert b["unit_index"][j].item() == r["unit_index"]
-        if version == "pairs/2":
-            assert b["target_known_share"].shape[0] == b["target_points"].shape[0] == b["target_view"].shape[0]
+        if version != "pairs/1":
+            assert b["target_known_share"].shape[0] == b["target_points"].shape[0] == b["target_view"].shape[0] == b["target_scene_share"].shape[0]
             assert b["target_view"].dtype == torch.int8
             known = torch.split(b["target_known_share"], b["target_lengths"].tolist())
             view = torch.split(b["target_view"], b["target_lengths"].tolist())
@@ -388,7 +393,7 @@ def main():
         ds.filesystem.copy_file(first, stray)
         ds = prd.open_dataset(plan["dataset"], storage_options=plan.get("storage_options"))
         report["planted"] = stray
-    assert ds.schema_version == version and ds.has_provenance == (version == "pairs/2"), (ds.schema_version, ds.has_provenance)
+    assert ds.schema_version == version and ds.has_provenance == (version != "pairs/1"), (ds.schema_version, ds.has_provenance)
     assert len(ds.shards) == plan["shards"], f"{len(ds.shards)} committed shards, the manifest has {plan['shards']}"
     assert ds.num_rows == len(ref), f"{ds.num_rows} rows, query gives {len(ref)}"
 

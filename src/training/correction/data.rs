@@ -19,6 +19,19 @@ pub struct LabelExample {
     pub sparse: Vec<f32>,
     pub dense: Vec<f32>,
     pub keep: Vec<bool>,
+    /// Where the example was seen from: the keys of its window's first, last and reference frames, the
+    /// target camera's working intrinsics `[fx, fy, cx, cy]` and `T_target_from_reference` (row-major).
+    pub window: LabelWindow,
+}
+
+/// The frames and camera of a label example (for a scene around its window, `eval correction --scene`).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct LabelWindow {
+    pub first_frame: String,
+    pub last_frame: String,
+    pub reference_frame: String,
+    pub intrinsics: [f64; 4],
+    pub t_target_from_reference: [f64; 16],
 }
 
 impl LabelExample {
@@ -93,7 +106,21 @@ impl LabelSet {
             set.push(
                 r.width as usize,
                 r.height as usize,
-                LabelExample { key: r.label_key, scene: r.scene, unit_index: r.unit_index, sparse, dense, keep },
+                LabelExample {
+                    key: r.label_key,
+                    scene: r.scene,
+                    unit_index: r.unit_index,
+                    sparse,
+                    dense,
+                    keep,
+                    window: LabelWindow {
+                        first_frame: r.first_frame,
+                        last_frame: r.last_frame,
+                        reference_frame: r.reference_frame,
+                        intrinsics: r.intrinsics,
+                        t_target_from_reference: r.t_target_from_reference,
+                    },
+                },
                 &name,
             )?;
         }
@@ -179,6 +206,7 @@ mod tests {
             sparse: vec![0.0, 1.0, 12.0],
             dense: vec![0.0; 3],
             keep: vec![true, false, true],
+            window: LabelWindow::default(),
         }
     }
 

@@ -50,6 +50,57 @@ pub fn evaluate_corrector(corrector: &dyn Corrector, set: &LabelSet) -> Result<C
     Ok(c)
 }
 
+/// Confusion of a `scene` correction on `set` (`rule`, `fallback` where the scene saw nothing): each
+/// example's scene is made of the frames of its sequence (found in `sequences` by name) around its
+/// reference frame ([`crate::scene::window_frames`] of the reference's block, the whole sequence as span),
+/// with its label window and `exclude` frames on each side held out (every frame of the window made the
+/// label), ray-cast at the example's target camera. One fusion per label window. Also returns the share
+/// of input pixels the scene saw.
+pub fn evaluate_scene(
+    set: &LabelSet,
+    sequences: &[crate::sources::Sequence],
+    config: &crate::scene::SceneConfig,
+    rule: crate::correction::SceneRule,
+    fallback: &dyn Corrector,
+    exclude: usize,
+) -> Result<(Confusion, f64)> {
+    use crate::geometry::{pose_from_rows, Intrinsics};
+    use crate::scene::{block_of, fuse_scene, scene_keep_mask, window_frames, HeldOut, Scene};
+    let mut c = Confusion::default();
+    let (mut seen, mut with_depth) = (0u64, 0u64);
+    let mut fused: Option<(String, Scene)> = None;
+    for e in &set.examples {
+        let w = &e.window;
+        let seq = sequences.iter().find(|s| s.name == e.scene).ok_or_else(|| Error::config("--scene-sequence", format!("no sequence named {} for label {}", e.scene, e.key)))?;
+        let position = |key: &str| seq.frames.iter().position(|f| f.key == key).ok_or_else(|| Error::config("--scene-sequence", format!("{}: no frame {key} (label {})", seq.name, e.key)));
+        let (first, last, reference) = (position(&w.first_frame)?, position(&w.last_frame)?, position(&w.reference_frame)?);
+        let window_key = format!("{}/{first}-{last}", seq.name);
+        if fused.as_ref().is_none_or(|(k, _)| *k != window_key) {
+            let held_out = HeldOut { position: (first + last) / 2, radius: (last - first).div_ceil(2) + exclude };
+            let frames = window_frames(config, block_of(reference, config), (0, seq.frames.len() - 1), |p| seq.frames[p].has_pose(), &[held_out]);
+            fused = Some((window_key, fuse_scene(&frames, |p| seq.frames[p].load(), &config.tsdf)?));
+        }
+        let scene = &fused.as_ref().expect("fused above").1;
+        let t_world_from_reference = seq.frames[reference].load()?.t_world_from_camera.ok_or_else(|| Error::input(&seq.frames[reference].depth_path, "frame has no camera pose"))?;
+        let t = pose_from_rows(&w.t_target_from_reference).map_err(|m| Error::input(&e.key, m))?;
+        let [fx, fy, cx, cy] = w.intrinsics;
+        let k = Intrinsics::new(fx, fy, cx, cy, set.width as u32, set.height as u32)?;
+        let ray = scene.depth_at(&k, &(t_world_from_reference * t.inverse()))?;
+        let input = e.input();
+        let metres: Vec<f32> = input.iter().map(|x| x * crate::nn::space::DEPTH_SCALE_M).collect();
+        let depth = DepthMap::new(set.width as u32, set.height as u32, metres)?;
+        let keep = scene_keep_mask(&depth, &ray, rule, &fallback.keep_mask(&depth));
+        for i in 0..input.len() {
+            if input[i] > 0.0 {
+                with_depth += 1;
+                seen += (ray.data()[i] > 0.0) as u64;
+            }
+        }
+        c.add(|i| input[i] > 0.0, &e.sparse, &e.dense, &e.keep, &keep);
+    }
+    Ok((c, seen as f64 / with_depth.max(1) as f64))
+}
+
 /// One line of the evaluation table.
 #[derive(Clone, Debug)]
 pub struct EvalRow {
