@@ -328,10 +328,15 @@ class Dataset:
     # -- row groups through cached footers (the training loaders' path) ---------------------------------
 
     def _source(self, shard, copy):
-        """(filesystem, path) to read ``shard`` from: the local copy in ``cache_dir`` when ``copy`` and the
-        dataset is on an object store with a ``cache_dir``, else the shard in its store."""
+        """(filesystem, path) to read ``shard`` from: on an object store with a ``cache_dir``, the local copy
+        (``copy=True``: made first if missing; ``"existing"``: only if it is already there), else the shard
+        in its store."""
         if copy and self.remote and self.cache_dir is not None:
-            return pafs.LocalFileSystem(), self.cached_copy(shard)
+            if copy != "existing":
+                return pafs.LocalFileSystem(), self.cached_copy(shard)
+            local = self._copy_path(shard)
+            if self._complete(shard, local):
+                return pafs.LocalFileSystem(), local
         return self.filesystem, shard.path
 
     def _copy_path(self, shard):
@@ -387,8 +392,7 @@ class Dataset:
                 return meta
         # From the local copy when there is one; never a reason to download the whole shard (its footer
         # is the store's, byte for byte).
-        local = self._copy_path(shard) if copy and self.remote and self.cache_dir is not None else None
-        fs, path = (pafs.LocalFileSystem(), local) if local and self._complete(shard, local) else (self.filesystem, shard.path)
+        fs, path = self._source(shard, "existing" if copy else False)
         with fs.open_input_file(path) as f:
             meta = pq.ParquetFile(f).metadata
         with self._lock:

@@ -47,10 +47,11 @@ def _wanted(columns, fields=None):
 
 def _selected_rows(dataset, shard, expr):
     """(row positions in the file, unit indices) of the rows of ``shard`` that ``expr`` selects (every row
-    when None): one read of the small columns of the whole shard (from the store, never a local copy)."""
-    names = dataset.footer(shard, copy=False).schema.to_arrow_schema().names
+    when None): one read of the small columns of the whole shard (from a local copy when there is one,
+    never a reason to make one)."""
+    names = dataset.footer(shard).schema.to_arrow_schema().names
     cols = ["unit_index"] if expr is None else [c for c in INDEX_COLUMNS if c in names]
-    t = dataset.read_groups(shard, range(len(dataset.group_rows(shard))), cols, copy=False)
+    t = dataset.read_groups(shard, range(len(dataset.group_rows(shard))), cols, copy="existing")
     t = t.append_column("__row", _pa().array(np.arange(t.num_rows, dtype=np.int64)))
     if expr is not None:
         t = t.filter(expr)
@@ -96,9 +97,16 @@ class PairDataset(_Base):
         self.cache_groups = int(cache_shards if cache_shards is not None else cache_groups)
         self._filter = selection_expression(status, scene, overlap_source, overlap_target, where)
         units, shards, groups, rows = [], [], [], []
-        for k, shard in enumerate(self.dataset.shards):
-            starts = np.cumsum([0] + self.dataset.group_rows(shard))
-            positions, unit = _selected_rows(self.dataset, shard, self._filter)
+        # The small columns of every shard: on an object store, 8 shards at a time (their requests are
+        # latency-bound); in a folder, one after the other.
+        read = lambda shard: (self.dataset.group_rows(shard), _selected_rows(self.dataset, shard, self._filter))
+        if self.dataset.remote and len(self.dataset.shards) > 1:
+            with ThreadPoolExecutor(max_workers=8) as pool:
+                selected = list(pool.map(read, self.dataset.shards))
+        else:
+            selected = [read(shard) for shard in self.dataset.shards]
+        for k, (sizes, (positions, unit)) in enumerate(selected):
+            starts = np.cumsum([0] + sizes)
             g = np.searchsorted(starts, positions, side="right") - 1
             units.append(unit)
             shards.append(np.full(len(unit), k, dtype=np.int32))
