@@ -45,12 +45,24 @@ def _wanted(columns, fields=None):
     return base + [c for c in columns if c not in base]
 
 
-def _selected_rows(dataset, shard, expr):
+def _filter_columns(status, scene, overlap_source, overlap_target, where):
+    """The small columns the selection arguments read (all of ``INDEX_COLUMNS`` for a ``where``, whose
+    fields are not known), ``unit_index`` first."""
+    if where is not None:
+        return list(INDEX_COLUMNS)
+    cols = ["unit_index"]
+    for name, value in (("status", status), ("scene", scene), ("overlap_source", overlap_source), ("overlap_target", overlap_target)):
+        if value is not None:
+            cols.append(name)
+    return cols
+
+
+def _selected_rows(dataset, shard, expr, columns=None):
     """(row positions in the file, unit indices) of the rows of ``shard`` that ``expr`` selects (every row
     when None): one read of the small columns of the whole shard (from a local copy when there is one,
     never a reason to make one)."""
     names = dataset.footer(shard).schema.to_arrow_schema().names
-    cols = ["unit_index"] if expr is None else [c for c in INDEX_COLUMNS if c in names]
+    cols = [c for c in (columns or INDEX_COLUMNS) if c in names] if expr is not None else ["unit_index"]
     t = dataset.read_groups(shard, range(len(dataset.group_rows(shard))), cols, copy="existing")
     t = t.append_column("__row", _pa().array(np.arange(t.num_rows, dtype=np.int64)))
     if expr is not None:
@@ -96,10 +108,11 @@ class PairDataset(_Base):
         self.fields = _fields(fields)
         self.cache_groups = int(cache_shards if cache_shards is not None else cache_groups)
         self._filter = selection_expression(status, scene, overlap_source, overlap_target, where)
+        small = _filter_columns(status, scene, overlap_source, overlap_target, where)
         units, shards, groups, rows = [], [], [], []
         # The small columns of every shard: on an object store, 8 shards at a time (their requests are
         # latency-bound); in a folder, one after the other.
-        read = lambda shard: (self.dataset.group_rows(shard), _selected_rows(self.dataset, shard, self._filter))
+        read = lambda shard: (self.dataset.group_rows(shard), _selected_rows(self.dataset, shard, self._filter, small))
         if self.dataset.remote and len(self.dataset.shards) > 1:
             with ThreadPoolExecutor(max_workers=8) as pool:
                 selected = list(pool.map(read, self.dataset.shards))
@@ -251,6 +264,7 @@ class StreamingPairDataset(_IterBase):
             piece_rows = 1 << 62 if whole else 16
         self.readahead = (2 if whole else 8 if self.dataset.remote else 2) if readahead is None else int(readahead)
         self._filter = selection_expression(status, scene, overlap_source, overlap_target, where)
+        self._filter_cols = _filter_columns(status, scene, overlap_source, overlap_target, where)
         #: (shard position, (row groups...)) of every piece: consecutive row groups of one shard holding at
         #: most ``piece_rows`` rows (or one group), in file order.
         self.pieces = []
@@ -293,13 +307,13 @@ class StreamingPairDataset(_IterBase):
         shard = self.dataset.shards[k]
         cols = _wanted(self.columns, self.fields)
         if self._filter is not None:
-            cols += [c for c in INDEX_COLUMNS if c not in cols]
+            cols += [c for c in self._filter_cols if c not in cols]
         ds = self.dataset  # a piece of every row group of a shard on an object store: one request for the object
         whole = ds.remote and ds.cache_dir is None and len(groups) == len(ds.group_rows(shard))
         table = ds.read_groups(shard, groups, cols, whole=whole)
         rows = None
         if self._filter is not None:  # the filter on the small columns only: filtering the table copies the clouds
-            small = table.select([c for c in INDEX_COLUMNS if c in table.column_names])
+            small = table.select([c for c in self._filter_cols if c in table.column_names])
             small = small.append_column("__row", _pa().array(np.arange(table.num_rows, dtype=np.int64)))
             rows = small.filter(self._filter).column("__row").to_numpy()
         return DecodedShard(table, extra=self.columns, fields=self.fields, rows=rows)
