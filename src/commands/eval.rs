@@ -320,9 +320,9 @@ fn run_inpaint(a: &EvalInpaintArgs, out: &mut dyn Write) -> Result<()> {
         NamedFill::new("ip_basic", &InpaintConfig::IpBasic {})?,
     ];
     if a.scene {
-        corrections.push(NamedCorrector::new("scene", &CorrectionConfig::scene(CorrectionConfig::OFFICIAL_MIN_POOL)));
-        let both = CorrectionConfig::Scene { margin: 0.05, fallback: Box::new(CorrectionConfig::OFFICIAL_MIN_POOL), fallback_everywhere: true };
-        corrections.push(NamedCorrector::new("scene&mp", &both));
+        let only_unseen = CorrectionConfig::Scene { margin: 0.05, fallback: Box::new(CorrectionConfig::OFFICIAL_MIN_POOL), fallback_everywhere: false };
+        corrections.push(NamedCorrector::new("scene", &only_unseen));
+        corrections.push(NamedCorrector::new("scene&mp", &CorrectionConfig::scene(CorrectionConfig::OFFICIAL_MIN_POOL)));
         let scene = |fallback: InpaintConfig| InpaintConfig::Scene { fallback: Box::new(fallback) };
         fills.push(NamedFill::new("scene", &scene(InpaintConfig::None {}))?);
         fills.push(NamedFill::new("scene+background", &scene(InpaintConfig::Background {}))?);
