@@ -16,7 +16,6 @@ mod checkpoints;
 mod correction;
 mod delta;
 mod descriptor;
-mod device;
 mod diffusion;
 mod export;
 mod faults;
