@@ -228,3 +228,98 @@ fn the_package_reads_version_1_datasets() {
         check(plan, &r, &d, &[]);
     }
 }
+
+/// Runs `tests/python/<script>` on `plan` (written to `dir/<script>.json`); returns its report (the last
+/// line of its output, JSON). The Python side fails, never skips, when a module it needs is missing.
+fn run_script(script: &str, plan: &Value, dir: &Path) -> Value {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let path = dir.join(format!("{script}.json"));
+    std::fs::write(&path, plan.to_string()).unwrap();
+    let mut c = Command::new(python());
+    c.arg(root.join("tests/python").join(script)).arg(&path).current_dir(dir);
+    for (k, _) in std::env::vars() {
+        if k.starts_with("AWS_") || k.starts_with("AZURE_") {
+            c.env_remove(k);
+        }
+    }
+    let out = ok(c.output().unwrap(), &format!("tests/python/{script} (pointreggpt_data with torch; the viewer check needs `pip install \"./python[viewer]\"`)"));
+    serde_json::from_str(out.trim().lines().last().unwrap()).unwrap()
+}
+
+/// A version-3 dataset whose targets have all three kinds of point (re-projected, seen by the scene,
+/// made up by the background fill), rejected rows (`min_overlap = 0.8`) and depth maps: one synthetic
+/// scene of `frames` frames, two samples each, shards of 40 units in row groups of 3 rows (uneven: 40 =
+/// 13 × 3 + 1).
+fn scene_config(dir: &Path, frames: usize) -> PathBuf {
+    let text = synthetic_config(1, frames, 1, 2, 160, 120, 40)
+        + "[validate]\nmin_overlap = 0.8\n[output]\nrow_group_rows = 3\n[inpaint]\nmethod = \"scene\"\nfallback = { method = \"background\" }\n";
+    let path = dir.join("scene-config.toml");
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+/// Issue 50's readers (tests/python/loader_check.py): `PairDataset` + `GroupShuffleSampler` (mix 1 and
+/// 2) and `StreamingPairDataset` (read-ahead threads, pieces of several row groups) give every `ok` pair
+/// exactly once per epoch across 2 ranks × 2 DataLoader workers, two epochs; every pair of every reader
+/// (and of `PairDataset(fields=MINIMAL_FIELDS)` in a random order) equals the in-order reader's bit for
+/// bit; with the depth-PNG column chunks of every shard overwritten by garbage, reading a PNG column
+/// raises while every reader still reads every pair, the same bytes (the columns it does not give are
+/// not read); the shuffle buffer keeps each pair within `buffer_size` places of where it arrived; and on
+/// a local S3 server (moto), whole-shard streaming, reads through local copies (`cache_dir`) and ranged
+/// random reads give the same pairs, once per epoch.
+#[test]
+fn the_new_readers_give_every_pair_once_the_same_bytes_and_never_read_unasked_columns() {
+    let _timing = crate::support::timed();
+    let dir = tempfile::tempdir().unwrap();
+    let config = scene_config(dir.path(), 96);
+    let ds = dir.path().join("ds");
+    build(&config, ds.to_str().unwrap(), &[]);
+    let shards = committed_shards(&ds);
+    assert_eq!(shards, 5, "192 units in shards of 40");
+    let reference = dir.path().join("reference.parquet");
+    let sql = "select unit_index, pair_key, status from pairs order by unit_index";
+    run(&["query", ds.to_str().unwrap(), sql, "--format", "parquet", "--output", reference.to_str().unwrap()], &[]);
+    let count = run(&["query", ds.to_str().unwrap(), "select count(*) n from pairs where status = 'ok'", "--format", "json"], &[]);
+    let ok_rows = serde_json::from_str::<Value>(count.trim()).unwrap()["n"].as_u64().unwrap();
+    let scratch = dir.path().join("scratch");
+    std::fs::create_dir(&scratch).unwrap();
+    let moto = Moto::start();
+    let plan = json!({"dataset": ds, "reference": reference, "scratch": scratch, "ranks": 2, "workers": 2, "buffer": 5, "s3_endpoint": moto.endpoint()});
+    let report = run_script("loader_check.py", &plan, dir.path());
+    assert_eq!(report["ok"], ok_rows, "{report}");
+    assert!(ok_rows > 0 && ok_rows < 192, "ok and rejected rows: {report}");
+    assert_eq!(report["row_groups"], 4 * 14 + 11, "row groups of 3 rows: {report}");
+    for part in ["readers", "projection"] {
+        for key in ["group_mix1_pairs", "group_mix2_pairs", "stream_pairs", "map_pairs"] {
+            assert_eq!(report[part][key], 2 * ok_rows, "{part} {key}: two epochs (or two random passes) of every ok pair: {report}");
+        }
+    }
+    assert_eq!(report["projection"]["png_reads_raising"], shards, "{report}");
+    assert!(report["projection"]["corrupted_chunks"].as_u64().unwrap() >= 4 * 67, "every PNG chunk of every row group: {report}");
+    assert!(report["buffer"]["largest_displacement"].as_u64().unwrap() <= 5, "{report}");
+    for key in ["stream_whole_shards_pairs", "stream_cached_pairs", "group_cached_pairs"] {
+        assert_eq!(report["s3"][key], 2 * ok_rows, "on the local S3 server, {key}: {report}");
+    }
+}
+
+/// The viewer extra (tests/python/viewer_check.py): `show_pair` with no display writes an `.rrd` file;
+/// read back with Rerun's own reader it holds the source cloud as stored, the target cloud in the source
+/// frame split into re-projected, scene and made-up points as the stored shares say, and the depth
+/// images with the PNGs' pixels.
+#[test]
+fn show_pair_writes_a_recording_of_both_clouds_by_provenance_and_the_depth_images() {
+    let _timing = crate::support::timed();
+    let dir = tempfile::tempdir().unwrap();
+    let config = scene_config(dir.path(), 48);
+    let ds = dir.path().join("ds");
+    build(&config, ds.to_str().unwrap(), &[]);
+    let scratch = dir.path().join("scratch");
+    std::fs::create_dir(&scratch).unwrap();
+    let report = run_script("viewer_check.py", &json!({"dataset": ds, "scratch": scratch}), dir.path());
+    for kind in ["reprojected", "scene", "made_up"] {
+        assert!(report["counts"][kind].as_u64().unwrap() > 0, "{kind}: {report}");
+    }
+    let file = report["file"].as_str().unwrap();
+    assert!(file.starts_with("pair-") && file.ends_with(".rrd"), "{report}");
+    assert!(std::fs::metadata(scratch.join(file)).unwrap().len() > 0, "written in the working folder: {report}");
+}
