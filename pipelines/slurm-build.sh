@@ -10,6 +10,9 @@
 #   sbatch --array=0-15 pipelines/slurm-build.sh pipelines/paper-3dmatch.toml s3://my-bucket/prgpt   # no shared folder
 #                                                              (credentials from AWS_* or AWS_PROFILE, exported before sbatch)
 #   sbatch --array=0-3 --cpus-per-task=2 --mem=2G pipelines/slurm-build.sh pipelines/demo.toml /shared/demo
+#   sbatch --array=0-15 --gres=gpu:1 pipelines/slurm-build.sh pipelines/paper-3dmatch.toml /shared/prgpt --device cuda
+#                                                              (one GPU per task: Slurm sets each task's CUDA_VISIBLE_DEVICES,
+#                                                               so `cuda` is that task's own GPU; needs a CUDA libtorch build)
 #
 # Resources: the #SBATCH lines below are defaults sized for the paper config (8 cores, 8 GB per task);
 # options given on the sbatch command line override them (e.g. --cpus-per-task, --mem, --time,

@@ -20,6 +20,10 @@ with the same code as the peers; `--ours` only brings their timing. Two tables: 
 fills (its coverage shown), and every row on the pixels all rows fill (IP-Basic leaves pixels far from any
 known depth empty, so alone its scores cover the easy part of a large hole).
 
+`rough` is the mean |4-neighbour Laplacian| of a row's depth on the filled pixels whose neighbours are filled,
+over the captured depth's on the same pixels: 1 is as rough as the sensor's own depth, below 1 smoother
+(a noise-free surface), above rougher.
+
 Usage: fill_peers.py --views DIR/<correction> [--ours eval.csv] [--label TEXT]
 """
 import argparse
@@ -150,6 +154,7 @@ class Scores:
         self.flying = 0
         self.cloud = 0.0
         self.seconds = 0.0
+        self.rough = [0.0, 0.0]  # |4-neighbour Laplacian| summed over interior filled pixels: the fill's, the capture's
 
     def add(self, known, out, g, k, lo, hi, only=None):
         """Scores one view; `only` (bool, H x W) restricts the filled pixels scored (the common pixels)."""
@@ -172,6 +177,14 @@ class Scores:
         fg = ndimage.minimum_filter(gi, size=3, mode="constant", cval=np.inf)
         bg = ndimage.maximum_filter(ga, size=3, mode="constant", cval=-np.inf)
         self.flying += int(((np.abs(out - fg) > FLYING_M) & (np.abs(out - bg) > FLYING_M) & sel).sum())
+        # Roughness: on filled pixels whose 4 neighbours are filled and captured too, the mean |Laplacian|
+        # of the fill against the capture's on the same pixels (1: as rough as the sensor; below: smoother).
+        inner = np.zeros_like(sel)
+        inner[1:-1, 1:-1] = sel[1:-1, 1:-1] & sel[:-2, 1:-1] & sel[2:, 1:-1] & sel[1:-1, :-2] & sel[1:-1, 2:]
+        lap = lambda d: np.abs(4 * d[1:-1, 1:-1] - d[:-2, 1:-1] - d[2:, 1:-1] - d[1:-1, :-2] - d[1:-1, 2:])
+        m = inner[1:-1, 1:-1]
+        self.rough[0] += float(lap(out.astype(np.float64))[m].sum())
+        self.rough[1] += float(lap(g.astype(np.float64))[m].sum())
         if sel.any():
             rr, cc = np.nonzero(gv)
             cloud = np.stack([(cc - k["cx"]) / k["fx"] * g[gv], (rr - k["cy"]) / k["fy"] * g[gv], g[gv]], 1)
@@ -201,6 +214,7 @@ class Scores:
             "edge_abs_rel": ba, "edge_rmse_m": br, "edge_delta_1_25": bd,
             "flying_share": self.flying / max(n, 1), "cloud_distance_m": self.cloud / max(n, 1),
             "ms_per_view": 1000.0 * self.seconds / max(self.views, 1),
+            "roughness_ratio": self.rough[0] / self.rough[1] if self.rough[1] > 0 else float("nan"),
         }
 
 
@@ -295,14 +309,14 @@ def main():
         print(f"{args.label} correction {corr}: {len(views)} views {w}x{h}, unknown share {rows[-1][1]['unknown_share']:.1%}; "
               f"scored on {title}; ratios = row / {best[0]} (above 1: worse than it)")
         print(f"{'fill':<28} {'cover':>6} {'AbsRel':>7} {'x':>5} {'RMSE m':>7} {'x':>5} {'d<1.25':>7} {'edgeAR':>7} {'edgeRM':>7} "
-              f"{'flying':>7} {'cloud cm':>8} {'ms/view':>8} {'ms/256²':>8}")
+              f"{'flying':>7} {'cloud cm':>8} {'ms/view':>8} {'ms/256²':>8} {'rough':>6}")
         b = best[1]
         for name, r in rows:
             ms256 = r["ms_per_view"] * 65536 / (w * h)
             print(f"{name:<28} {100 * r['fill_coverage']:5.1f}% {r['fill_abs_rel']:7.4f} {r['fill_abs_rel'] / b['fill_abs_rel']:5.2f} "
                   f"{r['fill_rmse_m']:7.3f} {r['fill_rmse_m'] / b['fill_rmse_m']:5.2f} {100 * r['fill_delta_1_25']:6.1f}% "
                   f"{r['edge_abs_rel']:7.4f} {r['edge_rmse_m']:7.3f} {100 * r['flying_share']:6.1f}% "
-                  f"{100 * r['cloud_distance_m']:8.2f} {r['ms_per_view']:8.1f} {ms256:8.1f}")
+                  f"{100 * r['cloud_distance_m']:8.2f} {r['ms_per_view']:8.1f} {ms256:8.1f} {r['roughness_ratio']:6.2f}")
         print()
     if args.csv:
         with open(args.csv, "w", newline="") as f:

@@ -35,6 +35,12 @@ pub struct BuildArgs {
     /// pairs are the same either way.
     #[arg(long, value_name = "SCENES", default_value_t = BuildOptions::SCENE_CACHE)]
     pub scene_cache: usize,
+    /// Where the config's networks run (the correction U-Net, the diffusion model): cpu, cuda or cuda:N.
+    /// Checked before any work: without that GPU (or with a CPU-only libtorch) the build stops at once.
+    /// Needs a CUDA libtorch (LIBTORCH_USE_PYTORCH=1 with a CUDA PyTorch, docs/building.md); not run on a
+    /// GPU in this project's tests (no GPU here). On the CPU the rows are the same whatever the threads.
+    #[arg(long, default_value = "cpu")]
+    pub device: String,
 }
 
 /// The flags `build` and `labels` share: where the dataset goes, overrides, the worker split.
@@ -72,7 +78,7 @@ impl RunArgs {
     pub fn options(&self, config: &Path) -> Result<BuildOptions> {
         let (worker, workers) = worker_from_env(self.worker, self.workers)?;
         let out = self.out.clone().unwrap_or_else(|| PathBuf::from("out").join(config.file_stem().unwrap_or_default()));
-        Ok(BuildOptions { out, worker, workers, strict: self.strict, progress: !self.no_progress, frame_cache: BuildOptions::FRAME_CACHE, scene_cache: BuildOptions::SCENE_CACHE })
+        Ok(BuildOptions { worker, workers, strict: self.strict, progress: !self.no_progress, ..BuildOptions::into_folder(out) })
     }
 }
 
@@ -107,12 +113,13 @@ pub fn worker_from_env(worker: Option<u64>, workers: Option<u64>) -> Result<(u64
 
 pub fn run(args: &BuildArgs, out: &mut dyn Write) -> Result<()> {
     let w = |e: std::io::Error| Error::io("<stdout>", e);
+    let device = crate::nn::parse_device(&args.device)?;
     let config = load_config(&args.config, &args.run.set)?;
     if args.run.print_config {
         write!(out, "{}", config.to_toml()).map_err(w)?;
         return Ok(());
     }
-    let opts = BuildOptions { frame_cache: args.frame_cache, scene_cache: args.scene_cache, ..args.run.options(&args.config)? };
+    let opts = BuildOptions { frame_cache: args.frame_cache, scene_cache: args.scene_cache, device, ..args.run.options(&args.config)? };
     let (dataset, worker, workers) = (opts.out.clone(), opts.worker, opts.workers);
     let cancel = CancelToken::new();
     cancel.cancel_on_signals();

@@ -117,17 +117,23 @@ impl CorrectionConfig {
         }
     }
 
-    /// The corrector this config describes; for `scene`, its fallback's (the scene's own rule needs the
-    /// scene, which [`crate::stages::correct`] applies on top: [`crate::scene::scene_keep_mask`]).
+    /// The corrector this config describes, on the CPU ([`Self::build_on`]).
     pub fn build(&self) -> Box<dyn Corrector> {
+        self.build_on(tch::Device::Cpu)
+    }
+
+    /// The corrector this config describes, its network (if any) on `device`; for `scene`, its fallback's
+    /// (the scene's own rule needs the scene, which [`crate::stages::correct`] applies on top:
+    /// [`crate::scene::scene_keep_mask`]).
+    pub fn build_on(&self, device: tch::Device) -> Box<dyn Corrector> {
         match *self {
-            CorrectionConfig::Scene { ref fallback, .. } => fallback.build(),
+            CorrectionConfig::Scene { ref fallback, .. } => fallback.build_on(device),
             CorrectionConfig::None {} => Box::new(NoCorrection),
             CorrectionConfig::MinPool { threshold } => Box::new(MinPoolFilter { threshold }),
             CorrectionConfig::Median { window, threshold } => Box::new(MedianFilter { window, threshold }),
             // `validate` loads the checkpoint first, so this only fails if the file changed in between.
             CorrectionConfig::Unet { checkpoint, threshold, .. } => Box::new(
-                UnetCorrector::load(checkpoint.as_path(), threshold, tch::Device::Cpu)
+                UnetCorrector::load(checkpoint.as_path(), threshold, device)
                     .unwrap_or_else(|e| panic!("correction checkpoint `{checkpoint}` (validated before the build): {e}")),
             ),
         }

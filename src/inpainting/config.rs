@@ -64,18 +64,23 @@ impl InpaintConfig {
         }
     }
 
-    /// The inpainter this config describes (call [`Self::validate`] first); for `scene`, its fallback's
-    /// (the scene's own fill needs the scene, which [`crate::stages::inpaint`] pastes first:
-    /// [`crate::scene::paste_scene`]).
+    /// The inpainter this config describes, on the CPU ([`Self::build_on`]).
     pub fn build(&self) -> crate::Result<Box<dyn Inpainter>> {
+        self.build_on(tch::Device::Cpu)
+    }
+
+    /// The inpainter this config describes (call [`Self::validate`] first), its network (if any) on
+    /// `device`; for `scene`, its fallback's (the scene's own fill needs the scene, which
+    /// [`crate::stages::inpaint`] pastes first: [`crate::scene::paste_scene`]).
+    pub fn build_on(&self, device: tch::Device) -> crate::Result<Box<dyn Inpainter>> {
         Ok(match self {
-            InpaintConfig::Scene { fallback } => fallback.build()?,
+            InpaintConfig::Scene { fallback } => fallback.build_on(device)?,
             InpaintConfig::None {} => Box::new(NoInpainting),
             InpaintConfig::PushPull {} => Box::new(PushPull),
             InpaintConfig::Nearest {} => Box::new(Nearest),
             InpaintConfig::Background {} => Box::new(Background),
             InpaintConfig::IpBasic {} => Box::new(IpBasic),
-            InpaintConfig::Diffusion(c) => Box::new(DiffusionInpainter::load(c, tch::Device::Cpu)?),
+            InpaintConfig::Diffusion(c) => Box::new(DiffusionInpainter::load(c, device)?),
         })
     }
 }

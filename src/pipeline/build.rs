@@ -42,6 +42,9 @@ pub struct BuildOptions {
     /// Scenes kept fused for the next units of their block (`scene` methods only); 0 fuses each unit's
     /// scene anew. Memory: a few tens of MB per scene at the default 1 cm voxels.
     pub scene_cache: usize,
+    /// Where the networks of the config (correction U-Net, diffusion model) run. A build on the CPU gives
+    /// the same rows whatever the thread count; on a GPU the networks' floating-point results may differ.
+    pub device: tch::Device,
 }
 
 impl BuildOptions {
@@ -52,7 +55,16 @@ impl BuildOptions {
 
     /// One worker of one, building into `out`: not strict, no progress bars, the default caches.
     pub fn into_folder(out: impl Into<PathBuf>) -> Self {
-        BuildOptions { out: out.into(), worker: 0, workers: 1, strict: false, progress: false, frame_cache: Self::FRAME_CACHE, scene_cache: Self::SCENE_CACHE }
+        BuildOptions {
+            out: out.into(),
+            worker: 0,
+            workers: 1,
+            strict: false,
+            progress: false,
+            frame_cache: Self::FRAME_CACHE,
+            scene_cache: Self::SCENE_CACHE,
+            device: tch::Device::Cpu,
+        }
     }
 }
 
@@ -115,7 +127,7 @@ pub fn run_build(config: &BuildConfig, opts: &BuildOptions, cancel: &CancelToken
     let frames = Arc::new(FrameCache::new(opts.frame_cache));
     let scenes = Arc::new(FrameCache::new(opts.scene_cache));
     let caches = Caches { frames: frames.clone(), scenes: scenes.clone() };
-    let stages = build_stages(config, &identity.content_hash, catalog, caches, opts.strict, rayon::current_num_threads())?;
+    let stages = build_stages(config, &identity.content_hash, catalog, caches, opts, rayon::current_num_threads())?;
     let mut sink = ShardSink::new(&dataset, config.shard_size, total_units, todo);
     let summary = run_pipeline(units, stages, &mut sink, todo_units, opts.progress, cancel)?;
     Ok(BuildReport {
@@ -140,13 +152,14 @@ fn build_stages(
     content_hash: &str,
     catalog: Arc<Catalog>,
     caches: Caches,
-    strict: bool,
+    opts: &BuildOptions,
     threads: usize,
 ) -> Result<Vec<StageSpec<PairUnit>>> {
     let Caches { frames, scenes } = caches;
+    let (strict, device) = (opts.strict, opts.device);
     let w = &config.working;
     let n = threads;
-    let mut inpainters = (0..n).map(|_| config.inpaint.build()).collect::<Result<Vec<_>>>()?.into_iter();
+    let mut inpainters = (0..n).map(|_| config.inpaint.build_on(device)).collect::<Result<Vec<_>>>()?.into_iter();
     let sv = &config.successive;
     // Successive views come one after another (each needs the memory the previous one grew), so their
     // inpainter fills one view per forward pass.
@@ -160,7 +173,14 @@ fn build_stages(
     }
     .into_iter();
     let mut stages = vec![
-        StageSpec::replicated(n, || Ingest { catalog: catalog.clone(), working: w.clone(), strict, frames: frames.clone(), voxel: config.voxelize.voxel }),
+        StageSpec::replicated(n, || Ingest {
+            catalog: catalog.clone(),
+            working: w.clone(),
+            strict,
+            frames: frames.clone(),
+            voxel: config.voxelize.voxel,
+            depth_maps: config.output.depth_maps,
+        }),
         StageSpec::replicated(n, || {
             config.pose.build(&config.correct.condition, w.depth_range(), w.crop_box, config.voxelize.voxel, config.validate.radius)
         }),
@@ -171,9 +191,9 @@ fn build_stages(
     }
     let scene_fill = config.inpaint.is_scene();
     stages.extend([
-        StageSpec::replicated(n, || config.correct.build(Target::Condition)),
+        StageSpec::replicated(n, || config.correct.build(Target::Condition, device)),
         StageSpec::replicated(n, || Inpaint { inpainter: inpainters.next().expect("one inpainter per worker"), scene: scene_fill }),
-        StageSpec::replicated(n, || config.correct.build(Target::Output)),
+        StageSpec::replicated(n, || config.correct.build(Target::Output, device)),
     ]);
     if !sv.is_off() {
         stages.push(StageSpec::replicated(n, || {

@@ -31,13 +31,13 @@ impl CorrectConfig {
         self.output.validate("correct.output")
     }
 
-    /// The stage correcting `target` (call [`Self::validate`] first).
-    pub fn build(&self, target: Target) -> Correct {
+    /// The stage correcting `target` (call [`Self::validate`] first), its network (if any) on `device`.
+    pub fn build(&self, target: Target, device: tch::Device) -> Correct {
         let method = match target {
             Target::Condition => &self.condition,
             Target::Output => &self.output,
         };
-        Correct { target, corrector: method.build(), scene_rule: method.scene_rule() }
+        Correct { target, corrector: method.build_on(device), scene_rule: method.scene_rule() }
     }
 
     /// Whether either correction is `scene`.

@@ -9,6 +9,7 @@ use crate::error::{Error, Result};
 use crate::geometry::{backproject, voxel_downsample, AxisBox, DepthMap, DepthRange, Intrinsics, Point, ResizeCrop};
 use crate::runtime::Stage;
 use crate::shards::row::Status;
+use crate::sources::depth_png::encode_depth_png;
 use crate::sources::{Catalog, Frame};
 use nalgebra::Isometry3;
 use serde::{Deserialize, Serialize};
@@ -84,11 +85,13 @@ impl WorkingConfig {
     }
 }
 
-/// A frame as every sample of it starts: decoded, at the working resolution, back-projected.
+/// A frame as every sample of it starts: decoded, at the working resolution, back-projected, and its
+/// working-resolution depth encoded as the rows' `source_depth_png` (once for all its samples).
 pub struct PreparedFrame {
     source_path: String,
     source_hash: String,
-    depth: DepthMap,
+    /// The 16-bit millimetre PNG of the working-resolution depth (empty when the rows store no depth maps).
+    depth_png: Vec<u8>,
     k: Intrinsics,
     memory: Vec<Point>,
     /// `memory` voxel-downsampled: the pair's source cloud.
@@ -105,6 +108,8 @@ pub struct Ingest {
     pub frames: Arc<FrameCache<PreparedFrame>>,
     /// Voxel edge of the source cloud, metres (`voxelize.voxel`).
     pub voxel: f32,
+    /// Whether the rows store the depth maps (`output.depth_maps`): the source's PNG is encoded here.
+    pub depth_maps: bool,
 }
 
 impl Ingest {
@@ -116,8 +121,12 @@ impl Ingest {
             return Err(Error::input(&frame.depth_path, "depth map has no valid pixel inside the depth range and crop box"));
         }
         let source_points = voxel_downsample(&memory, self.voxel);
+        let depth_png = match self.depth_maps {
+            true => encode_depth_png(depth.width(), depth.height(), &depth.to_raw(1000.0))?,
+            false => Vec::new(),
+        };
         let t_world_from_camera = frame.t_world_from_camera;
-        Ok(PreparedFrame { source_path: frame.depth_path.display().to_string(), source_hash: frame.content_hash, depth, k, memory, source_points, t_world_from_camera })
+        Ok(PreparedFrame { source_path: frame.depth_path.display().to_string(), source_hash: frame.content_hash, depth_png, k, memory, source_points, t_world_from_camera })
     }
 
     fn prepare(&self, unit: &mut PairUnit) -> Result<()> {
@@ -136,7 +145,7 @@ impl Ingest {
         unit.source_path = f.source_path.clone();
         unit.source_hash = f.source_hash.clone();
         unit.k = Some(f.k);
-        unit.source_depth = Some(f.depth.clone());
+        unit.source_depth_png = f.depth_png.clone();
         unit.memory = f.memory.clone();
         unit.source_points = f.source_points.clone();
         unit.t_world_from_source = f.t_world_from_camera;

@@ -111,7 +111,7 @@ impl Stage<PairUnit> for Pack {
             target_view: std::mem::take(&mut u.target_tags).iter().map(|t| t.view).collect(),
             overlap_source: u.overlap.source,
             overlap_target: u.overlap.target,
-            source_depth_png: png(&raw(&u.source_depth))?,
+            source_depth_png: std::mem::take(&mut u.source_depth_png),
             condition_depth_png,
             target_depth_png,
             known_mask_png,
@@ -120,7 +120,6 @@ impl Stage<PairUnit> for Pack {
             stages: self.stages_json.clone(),
             timings: Vec::new(), // filled by the sink: the pack stage's own timing is recorded after this
         });
-        u.source_depth = None;
         u.condition = None;
         u.target_depth = None;
         u.known = Vec::new();

@@ -23,8 +23,8 @@ pub struct PairUnit {
     pub source_hash: String,
     /// Working-resolution intrinsics (source and target cameras share them).
     pub k: Option<Intrinsics>,
-    /// Source depth at the working resolution.
-    pub source_depth: Option<DepthMap>,
+    /// The 16-bit millimetre PNG of the source depth at the working resolution (empty when not stored).
+    pub source_depth_png: Vec<u8>,
     /// Source points in the crop box, full resolution (the "scene memory"), source camera frame.
     pub memory: Vec<Point>,
     /// The source frame's camera-to-world pose, when its sequence has one.
@@ -72,7 +72,7 @@ impl PairUnit {
             source_path: String::new(),
             source_hash: String::new(),
             k: None,
-            source_depth: None,
+            source_depth_png: Vec::new(),
             memory: Vec::new(),
             t_world_from_source: None,
             t_target_from_source: Isometry3::identity(),

@@ -273,12 +273,13 @@ fn two_workers_publish_a_table_that_deltalake_polars_and_duckdb_read_as_query_do
         ("height", "integer"), ("pose_draws", "integer"), ("status", "string"), ("overlap_source", "double"), ("overlap_target", "double"),
         ("source_intrinsics", "array<double>"), ("t_target_from_source", "array<double>"), ("source_points", "array<array<float>>"),
         ("target_points", "array<array<float>>"), ("target_known_share", "array<float>"), ("target_view", "array<byte>"),
+        ("scene_frames", "integer"), ("target_scene_share", "array<float>"),
         ("source_depth_png", "binary"), ("timings", "array<struct<stage: string, ms: double>>"),
     ];
     for (column, t) in expected {
         assert_eq!(info["schema"][column], t, "{column}");
     }
-    assert_eq!(info["schema"].as_object().unwrap().len(), 30);
+    assert_eq!(info["schema"].as_object().unwrap().len(), 32);
     assert_eq!(info["nullable"], serde_json::json!([]));
     let manifest = Dataset::open(out).unwrap().committed("pairs").unwrap();
     let files: BTreeMap<String, u64> = manifest.values().map(|e| (format!("shards/{}", e.file), e.rows)).collect();
@@ -457,7 +458,7 @@ fn bad_logs_and_datasets_are_refused_naming_the_file() {
 
     // A version-1 dataset (unsigned integers) is not published, naming its dataset.toml and a column.
     let toml = root.join("dataset.toml");
-    std::fs::write(&toml, std::fs::read_to_string(&toml).unwrap().replace("\"pairs/2\"", "\"pairs/1\"")).unwrap();
+    std::fs::write(&toml, std::fs::read_to_string(&toml).unwrap().replace(&format!("\"{}\"", pointreggpt::shards::SCHEMA_VERSION), "\"pairs/1\"")).unwrap();
     let e = err(&Dataset::open(&root).unwrap());
     assert!(e.contains("dataset.toml") && e.contains("pairs/1") && e.contains("unsigned"), "{e}");
 }

@@ -16,6 +16,7 @@ mod checkpoints;
 mod correction;
 mod delta;
 mod descriptor;
+mod device;
 mod diffusion;
 mod export;
 mod faults;

@@ -1,4 +1,4 @@
-//! Per-point provenance of the target cloud (`target_known_share`, `target_view`, schema pairs/2) against
+//! Per-point provenance of the target cloud (`target_known_share`, `target_view`, schema pairs/2 and later) against
 //! an independent count: the stored target depth PNG and known-pixel mask back-projected and binned into
 //! 2.5 cm voxels here, in the test, without the pipeline's code; plus the exact properties a re-projection-
 //! only build and a build with successive views must have.

@@ -69,7 +69,7 @@ fn filter_cases() -> Vec<(Value, Option<&'static str>, &'static str)> {
 fn reference(dataset: &str, dir: &Path, provenance: bool, varied: bool, env: &[(&str, String)]) -> Reference {
     let parquet = dir.join("reference.parquet");
     let columns = "unit_index, pair_key, scene, status, seed, t_target_from_source, source_points, target_points, overlap_source, overlap_target";
-    let provenance_columns = if provenance { ", target_known_share, target_view" } else { "" };
+    let provenance_columns = if provenance { ", target_known_share, target_scene_share, target_view" } else { "" };
     let sql = format!("select {columns}{provenance_columns} from pairs order by unit_index");
     run(&["query", dataset, &sql, "--format", "parquet", "--output", parquet.to_str().unwrap()], env);
     let keys = |predicate: &str| -> Vec<String> {
@@ -131,7 +131,7 @@ fn the_package_reads_a_folder_as_query_does() {
     build(&config, ds.to_str().unwrap(), &[]);
     let r = reference(ds.to_str().unwrap(), dir.path(), true, true, &[]);
     let plan = json!({
-        "dataset": ds, "storage_options": null, "schema_version": "pairs/2", "shards": committed_shards(&ds),
+        "dataset": ds, "storage_options": null, "schema_version": pointreggpt::shards::SCHEMA_VERSION, "shards": committed_shards(&ds),
         "plant_uncommitted": true, "count_bytes": true, "loader_workers": 2,
     });
     let report = check(plan, &r, dir.path(), &[]);
@@ -163,7 +163,7 @@ fn the_package_reads_an_s3_dataset_as_query_does() {
         "dataset": url,
         "storage_options": {"endpoint_url": moto.endpoint(), "access_key": "testing", "secret_key": "testing", "region": "us-east-1"},
         "env": env.iter().map(|(k, v)| (k.to_string(), json!(v))).collect::<serde_json::Map<String, Value>>(),
-        "schema_version": "pairs/2", "shards": committed_shards(&local),
+        "schema_version": pointreggpt::shards::SCHEMA_VERSION, "shards": committed_shards(&local),
         "plant_uncommitted": true, "loader_workers": 2,
     });
     let report = check(plan, &r, dir.path(), &[]);
@@ -185,7 +185,7 @@ fn the_streaming_loader_gives_every_pair_once_per_epoch_across_ranks_and_workers
     assert_eq!(committed_shards(&ds), 5);
     let r = reference(ds.to_str().unwrap(), dir.path(), true, false, &[]);
     let plan = json!({
-        "dataset": ds, "storage_options": null, "schema_version": "pairs/2", "shards": 5,
+        "dataset": ds, "storage_options": null, "schema_version": pointreggpt::shards::SCHEMA_VERSION, "shards": 5,
         "any_rows_per_filter": true, "loader_workers": 0, "streaming": {"ranks": 2, "workers": 3},
     });
     let report = check(plan, &r, dir.path(), &[]);
@@ -205,8 +205,9 @@ fn the_package_reads_version_1_datasets() {
     let v1 = dir.path().join("v1");
     build(&config, v1.to_str().unwrap(), &[]);
     let header = std::fs::read_to_string(v1.join("dataset.toml")).unwrap();
-    assert!(header.contains("dataset.schema_version = \"pairs/2\""));
-    std::fs::write(v1.join("dataset.toml"), header.replace("dataset.schema_version = \"pairs/2\"", "dataset.schema_version = \"pairs/1\"")).unwrap();
+    let current = format!("dataset.schema_version = \"{}\"", pointreggpt::shards::SCHEMA_VERSION);
+    assert!(header.contains(&current));
+    std::fs::write(v1.join("dataset.toml"), header.replace(&current, "dataset.schema_version = \"pairs/1\"")).unwrap();
     for sub in ["shards", "manifest"] {
         std::fs::remove_dir_all(v1.join(sub)).unwrap();
         std::fs::create_dir(v1.join(sub)).unwrap();
