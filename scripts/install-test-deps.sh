@@ -13,6 +13,8 @@
 #   and ~360 MB; it needs Node.js and npm, from Debian when missing).
 # - Debian (apt): slurm-wlm and munge, the one-node Slurm cluster tests/slurm.rs starts (~8 s).
 #   deltalake and polars read the datasets' Delta Lake tables in tests/delta.rs (tests/python/delta_peer.py).
+# - rerun-sdk, the viewer extra of the project's Python package (`pip install "./python[viewer]"`), which
+#   tests/python/viewer_check.py writes an .rrd file with and reads it back.
 # - Last, the project's own Python package, python/ (pointreggpt_data, checked by tests/python_package.rs),
 #   with `pip install ./python`, reinstalled whenever the installed copy differs from python/.
 # `make test` and .ci/run run this first.
@@ -38,7 +40,8 @@ KUBERNETES_VALIDATE_VERSION="1.37.0"
 AZURITE_VERSION="3.37.0"
 DELTALAKE_VERSION="1.6.6"
 POLARS_VERSION="2.1.0"
-CHECK='import pyarrow, duckdb, moto.server, flask, flask_cors, boto3, open3d, azure.storage.blob, kubernetes_validate, deltalake, polars'
+RERUN_VERSION="0.41.0"
+CHECK='import pyarrow, duckdb, moto.server, flask, flask_cors, boto3, open3d, azure.storage.blob, kubernetes_validate, deltalake, polars, rerun'
 
 die() {
     echo "install-test-deps: $*" >&2
@@ -134,10 +137,10 @@ fi
 command -v "$PYTHON" >/dev/null 2>&1 || die "no Python interpreter '$PYTHON' (set PYTHON=...)"
 "$PYTHON" -m pip --version >/dev/null 2>&1 || die "'$PYTHON -m pip' does not work; install pip first"
 
-echo "install-test-deps: $PYTHON -m pip install pyarrow==$PYARROW_VERSION duckdb==$DUCKDB_VERSION moto[s3]==$MOTO_VERSION flask==$FLASK_VERSION flask-cors==$FLASK_CORS_VERSION open3d==$OPEN3D_VERSION azure-storage-blob==$AZURE_BLOB_VERSION kubernetes-validate==$KUBERNETES_VALIDATE_VERSION deltalake==$DELTALAKE_VERSION polars==$POLARS_VERSION"
+echo "install-test-deps: $PYTHON -m pip install pyarrow==$PYARROW_VERSION duckdb==$DUCKDB_VERSION moto[s3]==$MOTO_VERSION flask==$FLASK_VERSION flask-cors==$FLASK_CORS_VERSION open3d==$OPEN3D_VERSION azure-storage-blob==$AZURE_BLOB_VERSION rerun-sdk==$RERUN_VERSION kubernetes-validate==$KUBERNETES_VALIDATE_VERSION deltalake==$DELTALAKE_VERSION polars==$POLARS_VERSION"
 if ! "$PYTHON" -m pip install --disable-pip-version-check -q \
     "pyarrow==$PYARROW_VERSION" "duckdb==$DUCKDB_VERSION" "moto[s3]==$MOTO_VERSION" \
-    "flask==$FLASK_VERSION" "flask-cors==$FLASK_CORS_VERSION" "open3d==$OPEN3D_VERSION" \
+    "flask==$FLASK_VERSION" "flask-cors==$FLASK_CORS_VERSION" "open3d==$OPEN3D_VERSION" "rerun-sdk==$RERUN_VERSION" \
     "azure-storage-blob==$AZURE_BLOB_VERSION" "kubernetes-validate==$KUBERNETES_VALIDATE_VERSION" \
     "deltalake==$DELTALAKE_VERSION" "polars==$POLARS_VERSION"; then
     die "pip install failed: is PyPI reachable? (see pip's message above)"
