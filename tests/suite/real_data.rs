@@ -141,3 +141,63 @@ fn auto_layout_on_7scenes_gives_one_sequence() {
     assert_eq!(seqs[0].name, "7scenes-redkitchen");
     assert_eq!(seqs[0].frames.len(), 400);
 }
+
+/// The two real folders the README's results rest on besides redkitchen, opened as the commands open them:
+/// the TUM fr3 cabinet key frames (TUM layout: 58 frames at 5000 units per metre, TUM's default camera,
+/// every frame an exact ground-truth sample) and the ICL-NUIM living room (ScanNet layout: 801 frames in
+/// millimetres, the camera of its `intrinsic_depth.txt`, every frame posed). Their poses agree with their
+/// depth: a frame re-projected into a neighbour with the ground truth lands on the neighbour's depth, far
+/// better than with the pose of a frame further away.
+#[test]
+fn tum_cabinet_and_icl_nuim_open_with_their_cameras_and_poses_that_fit_the_depth() {
+    let _timing = crate::support::timed();
+    let Some(root) = real_data() else { return };
+    let tum = open_sequences(&root.join("tum-fr3-cabinet-keyframes"), Layout::Auto).unwrap();
+    assert_eq!(tum.len(), 1);
+    let frames = &tum[0].frames;
+    assert_eq!(frames.len(), 58);
+    assert_eq!((tum[0].poses.exact, tum[0].poses.interpolated, tum[0].poses.without), (58, 0, 0), "{:?}", tum[0].poses);
+    let k = frames[0].intrinsics;
+    assert_eq!((k.fx, k.fy, k.cx, k.cy, k.width, k.height), (525.0, 525.0, 319.5, 239.5, 640, 480));
+    assert!(frames.iter().all(|f| f.depth_scale == 5000.0 && f.intrinsics == k));
+    let loaded: std::collections::BTreeMap<usize, Frame> = frames.par_iter().enumerate().map(|(i, f)| (i, f.load().unwrap_or_else(|e| panic!("{e}")))).collect();
+    assert!(loaded.values().all(|f| f.depth.valid_count() > 100_000 && f.depth.data().iter().all(|z| *z < 13.2)));
+    check_neighbours("TUM cabinet", &loaded, &(0..57).step_by(4).map(|i| (i, i + 1, if i >= 5 { i - 5 } else { i + 5 })).collect::<Vec<_>>(), 0.05);
+
+    let icl = open_sequences(&root.join("icl-nuim-livingroom"), Layout::Auto).unwrap();
+    assert_eq!(icl.len(), 1);
+    let frames = &icl[0].frames;
+    assert_eq!(frames.len(), 801);
+    let k = frames[0].intrinsics;
+    assert_eq!((k.fx, k.fy, k.cx, k.cy, k.width, k.height), (481.2, 489.0, 319.5, 239.5, 640, 480));
+    assert!(frames.iter().all(|f| f.depth_scale == 1000.0 && f.has_pose()));
+    let picks: Vec<(usize, usize, usize)> = (0..780).step_by(60).map(|i| (i, i + 10, i + 60)).collect();
+    let mut wanted: Vec<usize> = picks.iter().flat_map(|&(a, b, c)| [a, b, c]).collect();
+    wanted.sort_unstable();
+    wanted.dedup();
+    let loaded: std::collections::BTreeMap<usize, Frame> = wanted.par_iter().map(|&i| (i, frames[i].load().unwrap_or_else(|e| panic!("{e}")))).collect();
+    check_neighbours("ICL-NUIM", &loaded, &picks, 0.03);
+}
+
+/// For each (source, target, far): the median |dz| of source re-projected into target with the ground
+/// truth is below `bound` metres, and with far's pose in place of target's more than twice that.
+fn check_neighbours(name: &str, frames: &std::collections::BTreeMap<usize, Frame>, picks: &[(usize, usize, usize)], bound: f32) {
+    let pose = |i: usize| frames[&i].t_world_from_camera.unwrap();
+    let k = frames[&picks[0].0].intrinsics;
+    let results: Vec<(usize, usize, f32, f32, usize)> = picks
+        .par_iter()
+        .map(|&(s, t, far)| {
+            let (good, n) = reprojection_median(&frames[&s].depth, &frames[&t].depth, &relative_pose(&pose(t), &pose(s)), &k);
+            let (wrong, _) = reprojection_median(&frames[&s].depth, &frames[&t].depth, &relative_pose(&pose(far), &pose(s)), &k);
+            (s, t, good, wrong, n)
+        })
+        .collect();
+    for (s, t, good, wrong, n) in &results {
+        eprintln!("{name}: {s} -> {t}: median |dz| {:.1} mm over {n} pixels, with a far frame's pose {:.1} mm", good * 1000.0, wrong * 1000.0);
+    }
+    for (s, t, good, wrong, n) in results {
+        assert!(n > 20_000, "{name} {s} -> {t}: only {n} common pixels");
+        assert!(good < bound, "{name} {s} -> {t}: median |dz| {good} m with the ground truth");
+        assert!(wrong > 2.0 * good, "{name} {s} -> {t}: median |dz| {wrong} m with a far frame's pose, {good} m with the ground truth");
+    }
+}

@@ -2,13 +2,17 @@
 //! interpolation) and a stretch longer than the bound (those frames have no pose), a TUM folder without
 //! ground truth, and a plain folder of depth PNGs. Commands whose pairs take their truth from the poses
 //! (`fragments`, `labels`, `eval boost`) leave the unposed frames out and count them (`--strict` stops);
-//! a build needs no pose and uses every frame.
+//! a build needs no pose and uses every frame. The frames left out are checked in what the commands
+//! write (the fragment's cloud, the labels' windows, `eval boost`'s real pairs), not only in what they print;
+//! the TUM interpolation bound is pinned at 100 ms; `--intrinsics` / `--depth-scale` and a config's camera
+//! replace a layout's own (the output equals the one from a folder that needs no override).
 
 use pointreggpt::shards::dataset::Dataset;
 use pointreggpt::shards::Status;
 use pointreggpt::sources::{depth_png, text};
 use std::path::{Path, PathBuf};
-use crate::support::bin;
+use crate::support::{self, bin};
+use pointreggpt::geometry::Point;
 
 fn run(args: &[&str]) -> (bool, String, String) {
     let o = bin().args(args).output().unwrap();
@@ -69,6 +73,43 @@ fn source_toml(root: &Path, camera: &str, layout: &str, extra: &str) -> String {
     )
 }
 
+/// A TUM folder `to` (named like `root`'s folder, under `to`) listing only frames `frames` of `root`, with
+/// the same ground truth.
+fn only_frames(root: &Path, to: PathBuf, frames: std::ops::Range<usize>) -> PathBuf {
+    let out = to.join(root.file_name().unwrap());
+    std::fs::create_dir_all(out.join("depth")).unwrap();
+    let mut list = String::from("# timestamp filename\n");
+    for line in std::fs::read_to_string(root.join("depth.txt")).unwrap().lines().filter(|l| !l.starts_with('#')).skip(frames.start).take(frames.len()) {
+        let file = line.split_whitespace().nth(1).unwrap();
+        std::fs::copy(root.join(file), out.join(file)).unwrap();
+        list += &format!("{line}\n");
+    }
+    std::fs::write(out.join("depth.txt"), list).unwrap();
+    std::fs::copy(root.join("groundtruth.txt"), out.join("groundtruth.txt")).unwrap();
+    out
+}
+
+/// The points of a PLY cloud, sorted (fusion may emit them in any order).
+fn sorted_cloud(path: &Path) -> Vec<[u32; 3]> {
+    let points: Vec<Point> = pointreggpt::ply::read_ply(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let mut v: Vec<[u32; 3]> = points.iter().map(|p| [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()]).collect();
+    v.sort_unstable();
+    v
+}
+
+/// The label rows of a labels dataset, by window and sample.
+fn read_labels(out: &Path) -> Vec<pointreggpt::shards::labels::LabelRow> {
+    let ds = Dataset::open(out).unwrap();
+    let mut rows = Vec::new();
+    for e in ds.committed(pointreggpt::shards::labels::LABELS_TABLE).unwrap().values() {
+        for b in ds.read_shard_batches(e).unwrap() {
+            rows.extend(pointreggpt::shards::labels::batch_to_labels(&b).unwrap());
+        }
+    }
+    rows.sort_by_key(|r| (r.unit_index, r.sample_index));
+    rows
+}
+
 #[test]
 fn tum_gaps_are_counted_in_inspect_fragments_labels_and_eval_boost_and_strict_stops() {
     let _timing = crate::support::timed();
@@ -86,6 +127,16 @@ fn tum_gaps_are_counted_in_inspect_fragments_labels_and_eval_boost_and_strict_st
     let out = run_ok(&["fragments", seq, "--intrinsics", &camera, "--frames-per-fragment", "10", "--out", bench.to_str().unwrap(), "--quiet"]);
     assert!(out.contains("4 clouds"), "{out}");
     assert!(out.contains(&format!("{} of the frames used left out for want of a pose", GAP.len())), "{out}");
+    // What was fused, not only what was printed: fragment 2 is the fragment of frames 25-29 alone (a TUM
+    // folder listing only those frames, fused as one fragment of 5 frames), point for point.
+    let alone = only_frames(&root, dir.path().join("alone"), 25..30);
+    let bench_alone = dir.path().join("bench-alone");
+    run_ok(&["fragments", alone.to_str().unwrap(), "--intrinsics", &camera, "--frames-per-fragment", "5", "--out", bench_alone.to_str().unwrap(), "--quiet"]);
+    let (gap_fragment, reference) = (sorted_cloud(&bench.join("rgbd_dataset_synthetic/cloud_bin_2.ply")), sorted_cloud(&bench_alone.join("rgbd_dataset_synthetic/cloud_bin_0.ply")));
+    assert!(reference.len() > 1000, "{} points", reference.len());
+    assert!(gap_fragment == reference, "fragment 2 ({} points) is not the fragment of frames 25-29 ({} points)", gap_fragment.len(), reference.len());
+    // The negative control: fragment 3 (frames 30-39, all posed) is not that fragment.
+    assert!(sorted_cloud(&bench.join("rgbd_dataset_synthetic/cloud_bin_3.ply")) != reference);
     let singles = dir.path().join("singles");
     let out = run_ok(&["fragments", seq, "--intrinsics", &camera, "--single-frames", "--every", "5", "--gaps", "5,10", "--out", singles.to_str().unwrap(), "--quiet"]);
     // Frames 0, 5, ..., 35 are used (sources and their partners 5 and 10 frames later); of the gap's
@@ -113,6 +164,17 @@ fn tum_gaps_are_counted_in_inspect_fragments_labels_and_eval_boost_and_strict_st
     let out = run_ok(&["labels", labels_cfg.to_str().unwrap(), "--out", labels.to_str().unwrap(), "--no-progress"]);
     assert!(out.contains(&format!("{} frame(s) without a camera pose left out of their windows; 0 window(s)", GAP.len())), "{out}");
     assert!(out.contains("4 windows"), "{out}");
+    // In the rows: window 2 fused its 5 posed frames 25-29, in the camera of frame 25 (the posed frame
+    // nearest its first); the other windows their 10 frames, each in the camera of its first.
+    let key = |i: usize| format!("rgbd_dataset_synthetic/{:.6}", 1000.0 + i as f64 / 30.0);
+    let rows = read_labels(&labels);
+    assert_eq!(rows.iter().map(|r| r.unit_index).collect::<std::collections::BTreeSet<_>>().len(), 4);
+    for r in &rows {
+        let w = r.unit_index as usize;
+        let (first, last, frames) = if w == 2 { (25, 29, 5) } else { (10 * w, 10 * w + 9, 10) };
+        assert_eq!((r.first_frame.as_str(), r.last_frame.as_str(), r.frames), (key(first).as_str(), key(last).as_str(), frames), "window {w}");
+        assert_eq!(r.reference_frame, key(first), "window {w}: reference frame");
+    }
     let (ok, _, err) = run(&["labels", labels_cfg.to_str().unwrap(), "--out", dir.path().join("labels-strict").to_str().unwrap(), "--no-progress", "--strict"]);
     assert!(!ok && err.contains("no camera pose"), "{err}");
 
@@ -129,6 +191,36 @@ fn tum_gaps_are_counted_in_inspect_fragments_labels_and_eval_boost_and_strict_st
     assert!(out.contains(&format!("{} of frames 0..40 have no camera pose: left out of the real pairs", GAP.len())), "{out}");
     let notes = std::fs::read_to_string(boost.join("data-notes.txt")).unwrap();
     assert!(notes.contains("left out of the real pairs"), "{notes}");
+    // In the pairs: `frag` trained on the real fragment pairs of windows of 10 frames every 5, the same
+    // pairs with the same overlaps as the `fragments` command makes of them (whose fragments leave the
+    // unposed frames out: checked above).
+    let strided = dir.path().join("bench-strided");
+    run_ok(&["fragments", seq, "--intrinsics", &camera, "--frames-per-fragment", "10", "--stride", "5", "--out", strided.to_str().unwrap(), "--quiet"]);
+    let mut want: Vec<(usize, usize, f64)> = Vec::new();
+    for b in ["3DMatch", "3DLoMatch"] {
+        let Ok(text) = std::fs::read_to_string(strided.join("metadata/benchmarks").join(b).join("rgbd_dataset_synthetic/gt_overlap.log")) else { continue };
+        for line in text.lines() {
+            let f: Vec<&str> = line.split_whitespace().collect();
+            want.push((f[0].parse().unwrap(), f[1].parse().unwrap(), f[2].parse().unwrap()));
+        }
+    }
+    want.sort_by(|a, b| (a.0, a.1).cmp(&(b.0, b.1)));
+    let mut got: Vec<(usize, usize, f64)> = std::fs::read_to_string(boost.join("frag/seed-0/training-pairs.tsv"))
+        .unwrap()
+        .lines()
+        .skip(1)
+        .map(|l| {
+            let f: Vec<&str> = l.split('\t').collect();
+            let k: Vec<&str> = f[0].split('/').collect();
+            (k[1].parse().unwrap(), k[2].parse().unwrap(), f[1].parse().unwrap())
+        })
+        .collect();
+    got.sort_by(|a, b| (a.0, a.1).cmp(&(b.0, b.1)));
+    assert!(want.len() >= 3, "{want:?}");
+    assert_eq!(got.iter().map(|g| (g.0, g.1)).collect::<Vec<_>>(), want.iter().map(|w| (w.0, w.1)).collect::<Vec<_>>(), "eval boost's real fragment pairs");
+    for (g, w) in got.iter().zip(&want) {
+        assert!((g.2 - w.2).abs() < 1e-3, "pair {}-{}: overlap {} in eval boost, {} from fragments", g.0, g.1, g.2, w.2);
+    }
     let mut strict = args.to_vec();
     let other = dir.path().join("boost-strict");
     *strict.iter_mut().find(|a| **a == boost.to_str().unwrap()).unwrap() = other.to_str().unwrap();
@@ -197,4 +289,109 @@ fn a_plain_depth_folder_builds_pairs() {
     let (ok, _, err) = run(&["build", bad.to_str().unwrap(), "--out", dir.path().join("x").to_str().unwrap()]);
     assert!(!ok && err.contains("source.layout") && err.contains("depth_scale"), "{err}");
     assert!(!dir.path().join("x").exists(), "a refused config writes nothing");
+}
+
+/// The TUM interpolation bound is the 100 ms docs/building.md promises: a frame whose two surrounding
+/// ground-truth samples are 99.8 ms apart gets the pose between them (linear in position), one whose
+/// samples are 100.2 ms apart gets none; `inspect` counts them so.
+#[test]
+fn tum_poses_are_interpolated_across_gaps_of_at_most_100_ms() {
+    let _timing = crate::support::timed();
+    use pointreggpt::sources::{open_sequences, Layout, OpenOptions, PoseSource};
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path().join("rgbd_dataset_bound");
+    std::fs::create_dir_all(root.join("depth")).unwrap();
+    let (mut list, mut gt) = (String::from("# timestamp filename\n"), String::from("# timestamp tx ty tz qx qy qz qw\n"));
+    // Frame 0 at 10.0 s between samples at 9.9501 and 10.0499 s (99.8 ms); frame 1 at 20.0 s between
+    // samples at 19.9499 and 20.0501 s (100.2 ms). The camera moves 1 m along x between the samples.
+    for (t, half) in [(10.0f64, 0.0499f64), (20.0, 0.0501)] {
+        let name = format!("depth/{t:.6}.png");
+        depth_png::write_depth_png(&root.join(&name), 8, 6, &[5000u16; 48]).unwrap();
+        list += &format!("{t:.6} {name}\n");
+        gt += &format!("{:.4} 0 0 0 0 0 0 1\n{:.4} 1 0 0 0 0 0 1\n", t - half, t + half);
+    }
+    std::fs::write(root.join("depth.txt"), list).unwrap();
+    std::fs::write(root.join("groundtruth.txt"), gt).unwrap();
+    let seqs = open_sequences(&root, OpenOptions { layout: Layout::Tum, ..Default::default() }).unwrap();
+    let frames = &seqs[0].frames;
+    assert_eq!(frames.len(), 2);
+    match &frames[0].pose {
+        PoseSource::Known(p) => {
+            let v = p.translation.vector;
+            assert!((v.x - 0.5).abs() < 1e-6 && v.y.abs() < 1e-9 && v.z.abs() < 1e-9, "interpolated at {v:?}, not halfway");
+        }
+        other => panic!("a frame between samples 99.8 ms apart has no interpolated pose: {other:?}"),
+    }
+    assert_eq!(frames[1].pose, PoseSource::None, "a frame between samples 100.2 ms apart got a pose");
+    let out = run_ok(&["inspect", root.to_str().unwrap()]);
+    assert!(out.contains("0 poses exact, 1 interpolated, 1 frame(s) without a pose"), "{out}");
+}
+
+/// `--intrinsics` and `--depth-scale` replace the layout's own camera and depth scale: a copy of a 3DMatch
+/// folder whose camera file is wrong and whose depth is stored at 2000 units per metre, opened with the
+/// true camera and scale, gives `fragments --single-frames` the original's clouds and pairs; without
+/// either option it does not. `inspect` shows the camera given.
+#[test]
+fn intrinsics_and_depth_scale_options_replace_the_layouts_own() {
+    let _timing = crate::support::timed();
+    use pointreggpt::sources::{open_sequences, CameraConfig, OpenOptions};
+    let dir = tempfile::tempdir().unwrap();
+    let src = support::synthetic_sequence(16, 703);
+    let copy = dir.path().join("copy").join("synthetic-703");
+    std::fs::create_dir_all(&copy).unwrap();
+    let k = text::read_numbers(&src.join("camera-intrinsics.txt")).unwrap();
+    let camera = format!("{},{},{},{}", k[0], k[4], k[2], k[5]);
+    for entry in std::fs::read_dir(&src).unwrap() {
+        let path = entry.unwrap().path();
+        let name = path.file_name().unwrap().to_str().unwrap().to_string();
+        if name.ends_with(".depth.png") {
+            let png = depth_png::read_depth_png(&path).unwrap();
+            assert!(png.data.iter().all(|&mm| mm < 30_000), "{name}: a depth too far to double");
+            let raw: Vec<u16> = png.data.iter().map(|&mm| mm * 2).collect();
+            depth_png::write_depth_png(&copy.join(&name), png.width, png.height, &raw).unwrap();
+        } else if name == "camera-intrinsics.txt" {
+            let wrong = format!("{} 0 {}\n0 {} {}\n0 0 1\n", k[0] * 1.25, k[2] + 7.0, k[4] * 1.25, k[5] - 5.0);
+            std::fs::write(copy.join(&name), wrong).unwrap();
+        } else {
+            std::fs::copy(&path, copy.join(&name)).unwrap();
+        }
+    }
+    // The library: the options reach every frame.
+    let given = OpenOptions { intrinsics: Some(CameraConfig::parse(&camera).unwrap()), depth_scale: Some(2000.0), ..Default::default() };
+    let frames = &open_sequences(&copy, given).unwrap()[0].frames;
+    let f = &frames[3];
+    assert_eq!((f.intrinsics.fx, f.intrinsics.fy, f.intrinsics.cx, f.intrinsics.cy, f.depth_scale), (k[0], k[4], k[2], k[5], 2000.0));
+    // The command line: the same clouds and pairs as from the original folder.
+    let fragments = |seq: &Path, name: &str, extra: &[&str]| -> std::collections::BTreeMap<String, Vec<u8>> {
+        let out = dir.path().join(name);
+        run_ok(&[&["fragments", seq.to_str().unwrap(), "--single-frames", "--every", "3", "--gaps", "3,6", "--out", out.to_str().unwrap(), "--quiet"][..], extra].concat());
+        files(&out)
+    };
+    let reference = fragments(&src, "reference", &[]);
+    assert!(reference.keys().filter(|k| k.ends_with(".ply")).count() >= 4 && reference.keys().any(|k| k.ends_with("gt.log")), "{:?}", reference.keys());
+    let both = fragments(&copy, "both", &["--intrinsics", &camera, "--depth-scale", "2000"]);
+    assert!(both == reference, "--intrinsics and --depth-scale: other files than the original folder's: {:?} vs {:?}", both.keys(), reference.keys());
+    assert!(fragments(&copy, "camera-only", &["--intrinsics", &camera]) != reference, "the depth scale made no difference");
+    assert!(fragments(&copy, "scale-only", &["--depth-scale", "2000"]) != reference, "the camera made no difference");
+    let shown = run_ok(&["inspect", copy.to_str().unwrap(), "--intrinsics", &camera]);
+    assert!(shown.contains(&format!("fx={:.3} fy={:.3} cx={:.3} cy={:.3}", k[0], k[4], k[2], k[5])), "{shown}");
+    let own = run_ok(&["inspect", copy.to_str().unwrap()]);
+    assert!(own.contains(&format!("fx={:.3}", k[0] * 1.25)), "{own}");
+}
+
+/// Every file under `dir` by relative path.
+fn files(dir: &Path) -> std::collections::BTreeMap<String, Vec<u8>> {
+    fn walk(base: &Path, dir: &Path, out: &mut std::collections::BTreeMap<String, Vec<u8>>) {
+        for e in std::fs::read_dir(dir).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                walk(base, &p, out);
+            } else {
+                out.insert(p.strip_prefix(base).unwrap().to_string_lossy().into_owned(), std::fs::read(&p).unwrap());
+            }
+        }
+    }
+    let mut out = std::collections::BTreeMap::new();
+    walk(dir, dir, &mut out);
+    out
 }
