@@ -328,3 +328,127 @@ fn the_real_manifest_rebuilds_the_local_folders_byte_for_byte() {
     }
     eprintln!("fetched {} files of 5 folders from the local mirror in {:.1} s", got.len(), t0.elapsed().as_secs_f64());
 }
+
+/// Two folders, `a-first` and `b-second` (fetched in that order), of two files each, served from
+/// `<tmp>/mirror/owner/repo/<commit>/data/<folder>/`. Returns (tmp, manifest, mirror).
+fn two_folders() -> (tempfile::TempDir, PathBuf, Mirror) {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut manifest = format!("# two folders\nsource up https://upstream.invalid/owner/repo/{COMMIT}/\n");
+    for folder in ["a-first", "b-second"] {
+        let up = tmp.path().join("mirror/owner/repo").join(COMMIT).join("data").join(folder);
+        std::fs::create_dir_all(&up).unwrap();
+        for (name, bytes) in [("x.txt", format!("{folder} x\n")), ("y.txt", format!("{folder} y\n").repeat(1000))] {
+            std::fs::write(up.join(name), &bytes).unwrap();
+            manifest += &format!("file {folder}/{name} {} {} fetch up:data/{folder}/{name}\n", bytes.len(), sha256(&up.join(name)));
+        }
+    }
+    let path = tmp.path().join("manifest.txt");
+    std::fs::write(&path, manifest).unwrap();
+    let mirror = Mirror::start(&tmp.path().join("mirror"));
+    (tmp, path, mirror)
+}
+
+/// A folder that fails does not stop the ones after it: they are fetched, verified and marked complete,
+/// and the run still fails naming the failing file; the rerun fetches only what failed.
+#[test]
+fn a_failing_folder_does_not_stop_the_others() {
+    let _timing = crate::support::timed();
+    let (tmp, manifest, mirror) = two_folders();
+    let dest = tmp.path().join("cache");
+    let broken = format!("/owner/repo/{COMMIT}/data/a-first/y.txt");
+    mirror.fault(&broken, Some(Fault::Missing));
+    let o = fetch(&manifest, &dest, &mirror, &[]);
+    let err = stderr(&o);
+    assert!(!o.status.success() && err.contains("a-first/y.txt") && err.contains("404"), "{err}");
+    assert!(!dest.join(".fetch/a-first.complete").exists(), "a folder with a missing file was marked complete");
+    assert!(dest.join(".fetch/b-second.complete").is_file(), "the folder after a failing one was not fetched: {err}");
+    assert_eq!(std::fs::read_to_string(dest.join("b-second/x.txt")).unwrap(), "b-second x\n");
+    assert!(leftovers(&dest).is_empty(), "temporary files left: {:?}", leftovers(&dest));
+    mirror.fault(&broken, None);
+    let o = fetch(&manifest, &dest, &mirror, &[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let hits = mirror.hits();
+    assert_eq!(hits[&format!("/owner/repo/{COMMIT}/data/b-second/x.txt")], 1, "a complete folder was fetched again: {hits:?}");
+    assert_eq!(hits[&broken], 2, "{hits:?}");
+    assert!(dest.join(".fetch/a-first.complete").is_file());
+}
+
+/// `--only` fetches the named folders and nothing else; a name the manifest lacks is an error listing
+/// the folders it has.
+#[test]
+fn only_fetches_the_named_folders() {
+    let _timing = crate::support::timed();
+    let (tmp, manifest, mirror) = two_folders();
+    let dest = tmp.path().join("cache");
+    let o = fetch(&manifest, &dest, &mirror, &["b-second"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(dest.join(".fetch/b-second.complete").is_file() && !dest.join("a-first").exists(), "{:?}", tree(&dest).keys());
+    assert!(mirror.hits().keys().all(|p| p.contains("/b-second/")), "{:?}", mirror.hits());
+    let o = fetch(&manifest, &dest, &mirror, &["c-none"]);
+    let err = stderr(&o);
+    assert!(!o.status.success() && err.contains("no folder 'c-none'") && err.contains("a-first, b-second"), "{err}");
+    let o = fetch(&manifest, &dest, &mirror, &["a-first", "b-second"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(tree(&dest).len(), 4);
+    assert_eq!(mirror.hits().len(), 4, "each file asked for once: {:?}", mirror.hits());
+}
+
+/// Temporary files an interrupted run left more than an hour ago are removed at the start of a run;
+/// recent ones (a run going on beside this one) stay.
+#[test]
+fn stale_temporary_files_are_removed_and_recent_ones_kept() {
+    let _timing = crate::support::timed();
+    let (tmp, manifest, mirror) = two_folders();
+    let dest = tmp.path().join("cache");
+    let tmp_dir = dest.join(".fetch/tmp");
+    std::fs::create_dir_all(&tmp_dir).unwrap();
+    let (old, recent) = (tmp_dir.join("old.part"), tmp_dir.join("recent.part"));
+    std::fs::write(&old, b"half a file").unwrap();
+    std::fs::write(&recent, b"being written").unwrap();
+    let two_hours_ago = std::time::SystemTime::now() - std::time::Duration::from_secs(7200);
+    std::fs::File::options().write(true).open(&old).unwrap().set_modified(two_hours_ago).unwrap();
+    let o = fetch(&manifest, &dest, &mirror, &[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(!old.exists(), "a temporary file two hours old was left");
+    assert!(recent.exists(), "a recent temporary file (another run's) was removed");
+    assert_eq!(leftovers(&dest), vec![recent]);
+}
+
+/// The manifest against its upstreams, not only against the script that wrote it: for one file of each
+/// source, read from the upstream repository itself (tests/fixtures/upstream/, SOURCES.txt says from
+/// where), the manifest must fetch that path of that repository and pin those bytes (size and SHA-256).
+/// A wrong repository, a wrong path or a pin of other bytes fails. (The pinned commits cannot be checked
+/// offline; the fetch from GitHub itself is what checks them.)
+#[test]
+fn the_manifest_fetches_files_from_the_repositories_and_paths_that_publish_them() {
+    let _timing = crate::support::timed();
+    let upstream = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/upstream");
+    let manifest = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/data-sources/manifest.txt")).unwrap();
+    let mut sources: HashMap<String, String> = HashMap::new();
+    let mut pins: HashMap<String, (u64, String)> = HashMap::new();
+    for line in manifest.lines().filter(|l| !l.starts_with('#')) {
+        let f: Vec<&str> = line.split_whitespace().collect();
+        match f.first() {
+            Some(&"source") => drop(sources.insert(f[1].to_string(), f[2].to_string())),
+            Some(&"file") if f[4] == "fetch" => drop(pins.insert(f[5].to_string(), (f[2].parse().unwrap(), f[3].to_string()))),
+            _ => {}
+        }
+    }
+    let listed = std::fs::read_to_string(upstream.join("SOURCES.txt")).unwrap();
+    let mut checked = Vec::new();
+    for line in listed.lines().filter(|l| !l.starts_with('#') && !l.trim().is_empty()) {
+        let f: Vec<&str> = line.split_whitespace().collect();
+        let (source, repo, path) = (f[0], f[1], f[3]);
+        let prefix = sources.get(source).unwrap_or_else(|| panic!("the manifest has no source {source}"));
+        assert!(prefix.starts_with(&format!("https://raw.githubusercontent.com/{repo}/")), "source {source} is {prefix}, not {repo}");
+        let bytes = std::fs::read(upstream.join(source).join(path)).unwrap();
+        let (size, sha) = pins.get(&format!("{source}:{path}")).unwrap_or_else(|| panic!("the manifest fetches no {source}:{path}"));
+        assert_eq!(*size, bytes.len() as u64, "{source}:{path}: the manifest's size");
+        assert_eq!(*sha, sha256(&upstream.join(source).join(path)), "{source}:{path}: the manifest pins other bytes than {repo} publishes");
+        checked.push(source.to_string());
+    }
+    checked.sort();
+    let mut all: Vec<String> = sources.keys().cloned().collect();
+    all.sort();
+    assert_eq!(checked, all, "one upstream file of each source");
+}
