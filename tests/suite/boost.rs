@@ -424,3 +424,115 @@ fn every_alias_and_the_fpfh_mlp_run_with_their_counts_and_other_settings_are_ref
     assert!(boost_with(&bench, &seq, &out, &extra).contains("0 units scored (0 of them trained first), 6 already done"));
 }
 
+/// The scene of a real single-frame key `<scene>/<i>/<j>` or a generated key `<scene>/frame-000012#3`.
+fn scene_of(key: &str) -> &str {
+    key.split('/').next().unwrap()
+}
+
+/// Several training sequences (`--sequence` twice), a benchmark of two scenes read `--by-scene`, and
+/// `--compare`: real and generated pairs come from both sequences (a run that used only the first, or
+/// numbered the units of both alike so that generators paired pairs of different sequences, fails), the
+/// generators' pairs still pair up unit by unit; each per-scene table row is the aggregation of the
+/// per-pair scores of that scene alone (the scenes' pair counts add up to the pooled table's); and the
+/// difference asked for with `--compare` appears, equal to the paired mean of the scores, and not without it.
+#[test]
+fn several_sequences_tables_by_scene_and_compare() {
+    let _timing = crate::support::timed();
+    let dir = tempfile::tempdir().unwrap();
+    let (a, b) = (support::synthetic_sequence(50, 500), support::synthetic_sequence(30, 501));
+    let bench = dir.path().join("bench");
+    for seed in [200, 201] {
+        let held_out = support::synthetic_sequence(40, seed);
+        run_ok(&["fragments", held_out.to_str().unwrap(), "--single-frames", "--every", "10", "--out", bench.to_str().unwrap(), "--quiet"]);
+    }
+    let out = dir.path().join("boost");
+    // 30 frames of each sequence, one generated pair per frame (60 units per generator): --pairs 40 takes
+    // generated pairs of both. (The generated draw takes the units in unit order, sequence by sequence:
+    // with --pairs 30 or less they would all be the first sequence's.)
+    let (seq_a, seq_b) = (format!("{}@0-29", a.display()), format!("{}@0-29", b.display()));
+    let args = |extra: &[&str]| -> Vec<String> {
+        let mut v = boost_args(&bench, &a, &out, &["--conditions", "C0,C1,C2,C3", "--seeds", "1", "--pairs", "40", "--steps", "2", "--samples", "100"]);
+        // Both sequences, each with its frames, in place of the tiny run's one.
+        let i = v.iter().position(|x| x == "--sequence").unwrap();
+        v.splice(i..i + 2, ["--sequence".to_string(), seq_a.clone(), "--sequence".to_string(), seq_b.clone()]);
+        v.extend(extra.iter().map(|s| s.to_string()));
+        v
+    };
+    let run_args = |extra: &[&str]| run_ok(&args(extra).iter().map(String::as_str).collect::<Vec<_>>());
+    let first = run_args(&["--by-scene", "--compare", "C2-C1"]);
+    assert!(first.contains("4 units scored (3 of them trained first), 0 already done"), "{first}");
+
+    // Both sequences gave pairs: each generator a dataset per sequence, every training set pairs of both.
+    for g in ["classical", "reproj"] {
+        for k in ["0", "1"] {
+            assert!(out.join("data").join(g).join(k).join("dataset.toml").is_file(), "no {g} dataset of sequence {k}");
+        }
+    }
+    let listing = |c: &str| read_tsv(&out.join(c).join("seed-0/training-pairs.tsv"));
+    let scenes = |c: &str| listing(c).iter().map(|(k, _, _)| scene_of(k).to_string()).collect::<std::collections::BTreeSet<_>>();
+    for c in ["C1", "C2", "C3"] {
+        assert_eq!(scenes(c), ["synthetic-500".to_string(), "synthetic-501".to_string()].into(), "{c}: the scenes of its training pairs");
+    }
+    // The two generators' pairs pair up unit by unit: the same keys in the same order.
+    let keys = |c: &str| listing(c).into_iter().map(|(k, _, _)| k).collect::<Vec<_>>();
+    assert_eq!(keys("C2"), keys("C3"), "C2's and C3's generated pairs share their units");
+    assert_eq!(keys("C2").len(), 40);
+
+    // --by-scene: a row per benchmark scene, each the aggregation of that scene's per-pair scores.
+    let scores = |unit: &str| {
+        let files = scores_files(&out.join(unit));
+        assert_eq!(files.len(), 1, "{unit}: {files:?}");
+        std::fs::read_to_string(&files[0]).unwrap()
+    };
+    let units = [("C0", "C0"), ("C1", "C1/seed-0"), ("C2", "C2/seed-0"), ("C3", "C3/seed-0")];
+    // (condition, scene) -> per-pair inlier ratios at 100 samples.
+    let mut per_scene: BTreeMap<(String, String), Vec<((String, usize, usize), f64)>> = BTreeMap::new();
+    for (c, unit) in units {
+        for line in scores(unit).lines().skip(1) {
+            let f: Vec<&str> = line.split('\t').collect();
+            assert_eq!(f[4], "100");
+            per_scene.entry((c.to_string(), f[1].to_string())).or_default().push(((f[1].to_string(), f[2].parse().unwrap(), f[3].parse().unwrap()), f[6].parse().unwrap()));
+        }
+    }
+    let scene_names: std::collections::BTreeSet<String> = per_scene.keys().map(|(_, s)| s.clone()).collect();
+    assert_eq!(scene_names, ["synthetic-200-frames".to_string(), "synthetic-201-frames".to_string()].into());
+    let csv = std::fs::read_to_string(out.join("boost.csv")).unwrap();
+    let mut rows = 0;
+    for line in csv.lines().skip(1) {
+        let f: Vec<&str> = line.split(',').collect();
+        let scene = f[0].strip_prefix("single-frame ").unwrap_or_else(|| panic!("not a per-scene row: {line}"));
+        let pairs = &per_scene[&(f[2].to_string(), scene.to_string())];
+        let mean = 100.0 * pairs.iter().map(|p| p.1).sum::<f64>() / pairs.len() as f64;
+        assert_eq!(f[4].parse::<usize>().unwrap(), pairs.len(), "{line}: pairs of {scene}");
+        assert!((f[8].parse::<f64>().unwrap() - mean).abs() < 1e-3, "{line}: IR {mean} from {scene}'s scores");
+        rows += 1;
+    }
+    assert_eq!(rows, 4 * 2, "a row per condition and scene:\n{csv}");
+    // --compare: the asked difference, the paired mean of the scores (per scene here).
+    let paired = std::fs::read_to_string(out.join("boost-paired.csv")).unwrap();
+    let compared: Vec<&str> = paired.lines().filter(|l| { let f: Vec<&str> = l.split(',').collect(); f[2] == "C2" && f[3] == "C1" }).collect();
+    assert_eq!(compared.len(), 2, "one C2 - C1 row per scene:\n{paired}");
+    for line in compared {
+        let f: Vec<&str> = line.split(',').collect();
+        let scene = f[0].strip_prefix("single-frame ").unwrap();
+        let (x, y) = (&per_scene[&("C2".to_string(), scene.to_string())], &per_scene[&("C1".to_string(), scene.to_string())]);
+        let diffs: Vec<f64> = x.iter().zip(y).map(|(p, q)| { assert_eq!(p.0, q.0, "paired on the same pairs"); 100.0 * (p.1 - q.1) }).collect();
+        assert_eq!(f[4].parse::<usize>().unwrap(), diffs.len(), "{line}");
+        assert!((f[5].parse::<f64>().unwrap() - diffs.iter().sum::<f64>() / diffs.len() as f64).abs() < 1e-3, "{line}");
+    }
+
+    // Pooled, without --compare: nothing is redone; the scenes' pair counts add up; no C2 - C1 row; the
+    // pooled numbers are the scores' (C2 - C1 checked through --compare above, C3 - C2 by default).
+    let pooled = run_args(&[]);
+    assert!(pooled.contains("0 units scored (0 of them trained first), 4 already done"), "{pooled}");
+    let csv = std::fs::read_to_string(out.join("boost.csv")).unwrap();
+    for line in csv.lines().skip(1) {
+        let f: Vec<&str> = line.split(',').collect();
+        assert_eq!(f[0], "single-frame", "{line}");
+        let total: usize = scene_names.iter().map(|s| per_scene[&(f[2].to_string(), s.clone())].len()).sum();
+        assert_eq!(f[4].parse::<usize>().unwrap(), total, "{line}: the scenes' pairs together");
+    }
+    let paired = std::fs::read_to_string(out.join("boost-paired.csv")).unwrap();
+    assert!(!paired.lines().any(|l| l.contains(",C2,C1,")), "a C2 - C1 row without --compare:\n{paired}");
+    check_table_against_scores(&out, &[("C0", vec!["C0"]), ("C1", vec!["C1/seed-0"]), ("C2", vec!["C2/seed-0"]), ("C3", vec!["C3/seed-0"])], &[("C3", "C2"), ("C1", "C0")]);
+}
