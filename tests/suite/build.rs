@@ -75,6 +75,11 @@ fn row_group_rows_changes_the_file_layout_and_nothing_else() {
     let again = run_build(&BuildConfig::from_toml(&base, "test").unwrap(), &BuildOptions::into_folder(dir.path().join("b")), &CancelToken::new()).unwrap();
     assert_eq!((again.already_committed, again.committed_now.len()), (3, 0));
     assert!(BuildConfig::from_toml(&format!("{base}[output]\nrow_group_rows = 0\n"), "test").unwrap().validate().is_err());
+    // The default is 16 rows (docs/building.md, "Row groups"): one shard of all 20 rows holds
+    // groups of 16 and 4.
+    let c = build_in_process(&synthetic_config(2, 20, 4, 2, 320, 240, 20), &dir.path().join("c"), 2);
+    assert_eq!(a, c, "the same rows in one shard");
+    assert_eq!(row_groups(&dir.path().join("c")), [("pairs-000000.parquet".to_string(), vec![16, 4])].into());
 }
 
 /// A point of a cloud is "on" the true surface within 2 cm: a 2.5 cm voxel's centroid lies on a plane

@@ -144,6 +144,33 @@ fn every_shell_and_python_block_of_the_readme_runs() {
     let plys = ply_files(&dir.path().join("out/demo-ply"));
     assert!(plys >= 3, "export --format ply --limit 3 wrote {plys} .ply files");
     assert!(all.contains("torch.Size"), "the training-loop block printed no batch:\n{all}");
+    // What they printed is what the dataset holds (counted here from its shards).
+    let rows = pointreggpt::shards::dataset::Dataset::open(dir.path().join("out/demo")).unwrap().read_pairs().unwrap();
+    let mut by_status: std::collections::BTreeMap<&str, usize> = std::collections::BTreeMap::new();
+    for r in &rows {
+        *by_status.entry(r.status.as_str()).or_default() += 1;
+    }
+    let ok = by_status.get("ok").copied().unwrap_or(0);
+    assert!(ok > 0, "{by_status:?}");
+    let shards = std::fs::read_dir(dir.path().join("out/demo/manifest")).unwrap().filter(|e| e.as_ref().unwrap().file_name().to_string_lossy().starts_with("pairs-")).count();
+    // A table row `status | count` (pretty tables of `query` and DuckDB alike).
+    let cells = |line: &str| -> Vec<String> { line.split(['|', '│']).map(|c| c.trim().to_string()).filter(|c| !c.is_empty()).collect() };
+    let has_row = |text: &str, status: &str, n: usize| text.lines().any(|l| { let c = cells(l); c.len() >= 2 && c[0] == status && c[1] == n.to_string() });
+    let (sh, python_out) = (&ran.iter().find(|(_, l, _)| l == "sh").unwrap().2, ran.iter().filter(|(_, l, _)| l == "python").map(|(_, _, s)| s.as_str()).collect::<String>());
+    for (status, n) in &by_status {
+        assert!(has_row(sh, status, *n), "`pointreggpt query` printed no `{status} | {n}` row:\n{sh}");
+        assert!(has_row(&python_out, status, *n), "DuckDB over the Delta table printed no `{status} | {n}` row:\n{python_out}");
+    }
+    assert!(sh.contains(&format!("pairs: {shards} shards intact, {} rows", rows.len())) && sh.contains("verify: ok"), "`pointreggpt verify` said otherwise:\n{sh}");
+    assert!(sh.contains("delta: version"), "{sh}");
+    assert!(python_out.contains(&format!("shape: ({ok}, 2)")), "Polars did not list the {ok} ok pairs:\n{python_out}");
+    // The batch: 4 source clouds stacked (their lengths add up to the stacked points), 4 poses.
+    let batch = python_out.lines().find(|l| l.starts_with("torch.Size")).unwrap();
+    let numbers: Vec<usize> = batch.split(|c: char| !c.is_ascii_digit()).filter(|s| !s.is_empty()).map(|s| s.parse().unwrap()).collect();
+    // torch.Size([N, 3]) [a, b, c, d] torch.Size([M, 3]) torch.Size([4, 4, 4])
+    assert_eq!(numbers.len(), 2 + 4 + 2 + 3, "{batch}");
+    assert_eq!(numbers[0], numbers[2..6].iter().sum::<usize>(), "{batch}: the stacked source points are the four clouds'");
+    assert_eq!((numbers[1], numbers[7], &numbers[8..]), (3, 3, &[4, 4, 4][..]), "{batch}");
 }
 
 /// What counts as a figure in the README's "What is measured" section, and the text units a figure's
