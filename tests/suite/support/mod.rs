@@ -82,9 +82,30 @@ pub fn bin() -> std::process::Command {
     command(env!("CARGO_BIN_EXE_pointreggpt"))
 }
 
-/// The Python interpreter the tests run peers with (`PYTHON`, default `python3`).
+/// The Python interpreter the tests run peers with: `PYTHON` (the Makefile sets it to the project's
+/// virtual environment), else that environment itself ([`python_for`]), never the system's `python3`.
 pub fn python() -> String {
-    std::env::var("PYTHON").unwrap_or_else(|_| "python3".into())
+    python_for(std::env::var_os("PYTHON"), std::env::var_os("POINTREGGPT_VENV"))
+}
+
+/// [`python`] for the given `PYTHON` and `POINTREGGPT_VENV` values: `PYTHON` when set, else
+/// `<POINTREGGPT_VENV, default the checkout's .venv>/bin/python`; it panics, naming `make test-deps`,
+/// when that does not exist (a plain `cargo test` before `make test-deps` fails rather than running the
+/// peers with whatever `python3` the machine has).
+pub fn python_for(python: Option<std::ffi::OsString>, venv: Option<std::ffi::OsString>) -> String {
+    if let Some(p) = python.filter(|p| !p.is_empty()) {
+        return p.to_string_lossy().into_owned();
+    }
+    let venv = venv.filter(|v| !v.is_empty()).map(PathBuf::from).unwrap_or_else(|| std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(".venv"));
+    let python = venv.join("bin").join("python");
+    assert!(
+        python.is_file(),
+        "PYTHON is not set and the project's virtual environment has no {}: run `make test-deps` (it makes {} and installs \
+         the peers), or `make test`; the tests never run the system's python3",
+        python.display(),
+        venv.display()
+    );
+    python.to_string_lossy().into_owned()
 }
 
 /// A Python peer process ([`python`]), with the caller's cloud credentials removed ([`command`]).
