@@ -112,8 +112,9 @@ pub struct EvalInpaintArgs {
     /// Add the scene rows: the frames around each source frame (the [scene] window of the first --pipeline
     /// config, else the default: blocks of 30, reach 60, every 3rd frame, 1 cm TSDF) fused and ray-cast at
     /// the target pose, WITHOUT the target frame and --scene-exclude frames on each side of it. Rows: the
-    /// `scene` correction (min-pool where the scene saw nothing; `scene&mp`: min-pool everywhere too), and
-    /// the fills `scene` (scene only),
+    /// `scene` correction (the default: pixels behind the scene's surface dropped, min-pool everywhere too;
+    /// `scene2`: the labels' two-sided rule, min-pool where the scene saw nothing; `scene2&mp`: the two-sided
+    /// rule and min-pool everywhere), and the fills `scene` (scene only),
     /// `scene+background`, `scene+push_pull`, `scene+nearest` (the fallback fills what the scene did not see).
     #[arg(long)]
     pub scene: bool,
@@ -209,10 +210,11 @@ fn run_correction(a: &EvalCorrectionArgs, out: &mut dyn Write) -> Result<()> {
         }
         let config = crate::scene::SceneConfig::default();
         let fallback = CorrectionConfig::OFFICIAL_MIN_POOL.build();
-        for everywhere in [false, true] {
-            let rule = SceneRule { margin: 0.05, fallback_everywhere: everywhere };
+        for (everywhere, behind_only) in [(false, false), (true, false), (false, true), (true, true)] {
+            let rule = SceneRule { margin: 0.05, fallback_everywhere: everywhere, behind_only };
             let (c, seen) = evaluate_scene(&set, &sequences, &config, rule, fallback.as_ref(), a.scene_exclude)?;
-            let method = format!("scene{} (saw {:.0}%)", if everywhere { "&min-pool" } else { "/min-pool" }, 100.0 * seen);
+            let name = format!("scene{}{}", if behind_only { " behind" } else { "" }, if everywhere { "&min-pool" } else { "/min-pool" });
+            let method = format!("{name} (saw {:.0}%)", 100.0 * seen);
             rows.push(EvalRow { method, tau_m: None, metrics: c.metrics() });
         }
     }
@@ -320,9 +322,15 @@ fn run_inpaint(a: &EvalInpaintArgs, out: &mut dyn Write) -> Result<()> {
         NamedFill::new("ip_basic", &InpaintConfig::IpBasic {})?,
     ];
     if a.scene {
-        let only_unseen = CorrectionConfig::Scene { margin: 0.05, fallback: Box::new(CorrectionConfig::OFFICIAL_MIN_POOL), fallback_everywhere: false };
-        corrections.push(NamedCorrector::new("scene", &only_unseen));
-        corrections.push(NamedCorrector::new("scene&mp", &CorrectionConfig::scene(CorrectionConfig::OFFICIAL_MIN_POOL)));
+        let rule = |fallback_everywhere, behind_only| CorrectionConfig::Scene {
+            margin: 0.05,
+            fallback: Box::new(CorrectionConfig::OFFICIAL_MIN_POOL),
+            fallback_everywhere,
+            behind_only,
+        };
+        corrections.push(NamedCorrector::new("scene2", &rule(false, false)));
+        corrections.push(NamedCorrector::new("scene2&mp", &rule(true, false)));
+        corrections.push(NamedCorrector::new("scene", &rule(true, true)));
         let scene = |fallback: InpaintConfig| InpaintConfig::Scene { fallback: Box::new(fallback) };
         fills.push(NamedFill::new("scene", &scene(InpaintConfig::None {}))?);
         fills.push(NamedFill::new("scene+background", &scene(InpaintConfig::Background {}))?);
@@ -399,8 +407,9 @@ fn correction_name(c: &crate::correction::CorrectionConfig) -> String {
         C::MinPool { .. } => "min_pool".into(),
         C::Median { .. } => "median".into(),
         C::Unet { threshold, .. } => format!("unet@{threshold}"),
-        C::Scene { fallback, fallback_everywhere: false, .. } => format!("scene/{}", correction_name(fallback)),
-        C::Scene { fallback, fallback_everywhere: true, .. } => format!("scene&{}", correction_name(fallback)),
+        C::Scene { fallback, fallback_everywhere, behind_only, .. } => {
+            format!("scene{}{}{}", if *behind_only { "B" } else { "" }, if *fallback_everywhere { "&" } else { "/" }, correction_name(fallback))
+        }
     }
 }
 

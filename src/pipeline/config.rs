@@ -95,7 +95,7 @@ const METHOD_SETTINGS: [(&str, &[&str]); 6] = [
     ("correction method \"min_pool\"", &["threshold"]),
     ("correction method \"median\"", &["window", "threshold"]),
     ("correction method \"unet\"", &["checkpoint", "threshold", "preset"]),
-    ("correction method \"scene\"", &["margin", "fallback", "fallback_everywhere"]),
+    ("correction method \"scene\"", &["margin", "fallback", "fallback_everywhere", "behind_only"]),
     ("inpaint method \"scene\"", &["fallback"]),
 ];
 

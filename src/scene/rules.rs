@@ -8,12 +8,14 @@ use crate::labels::label::keep_label;
 /// The keep mask of `depth` against the scene's depth `scene` seen from the same camera: where the scene
 /// has a surface, the rule that makes the correction labels (keep when `|depth − scene| < margin`: a pixel
 /// behind the fused surface by the margin or more penetrates it, one in front of it floats in space the
-/// scene saw empty), and with `fallback_everywhere` also `fallback`'s decision; where it has none (never
-/// observed), `fallback`'s decision; pixels without depth are kept (nothing to drop).
+/// scene saw empty; with `behind_only` only the first is dropped), and with `fallback_everywhere` also
+/// `fallback`'s decision; where it has none (never observed), `fallback`'s decision; pixels without depth
+/// are kept (nothing to drop).
 pub fn scene_keep_mask(depth: &DepthMap, scene: &DepthMap, rule: SceneRule, fallback: &[bool]) -> Vec<bool> {
     let label = keep_label(depth, scene, rule.margin);
     let (d, s) = (depth.data(), scene.data());
-    let seen = |i: usize| label[i] && (fallback[i] || !rule.fallback_everywhere);
+    let agrees = |i: usize| if rule.behind_only { d[i] - s[i] < rule.margin } else { label[i] };
+    let seen = |i: usize| agrees(i) && (fallback[i] || !rule.fallback_everywhere);
     (0..d.len()).map(|i| if d[i] <= 0.0 { true } else if s[i] > 0.0 { seen(i) } else { fallback[i] }).collect()
 }
 
@@ -42,11 +44,14 @@ mod tests {
         let depth = DepthMap::new(6, 1, vec![0.0, 2.01, 2.1, 1.9, 3.0, 3.0]).unwrap();
         let scene = DepthMap::new(6, 1, vec![2.0, 2.0, 2.0, 2.0, 0.0, 0.0]).unwrap();
         let fallback = [false, false, true, true, true, false];
-        let rule = SceneRule { margin: 0.05, fallback_everywhere: false };
+        let rule = SceneRule { margin: 0.05, fallback_everywhere: false, behind_only: false };
         assert_eq!(scene_keep_mask(&depth, &scene, rule, &fallback), vec![true, true, false, false, true, false]);
         // The fallback everywhere: pixel 1 (on the surface) is dropped too, by the fallback.
         let rule = SceneRule { fallback_everywhere: true, ..rule };
         assert_eq!(scene_keep_mask(&depth, &scene, rule, &fallback), vec![true, false, false, false, true, false]);
+        // Behind only: pixel 3 (10 cm in front of the surface) is kept.
+        let rule = SceneRule { fallback_everywhere: false, behind_only: true, ..rule };
+        assert_eq!(scene_keep_mask(&depth, &scene, rule, &fallback), vec![true, true, false, true, true, false]);
     }
 
     #[test]
