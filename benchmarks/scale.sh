@@ -23,6 +23,9 @@ FRAMES=400
 (( SIZE % FRAMES == 0 )) || { echo "scale bench: SIZE must be a multiple of $FRAMES" >&2; exit 1; }
 part() { [[ "$PARTS" == *" $1 "* ]]; }
 SETS=(--set "source.path=$REAL" --set inpaint.method=none --set select.every=1 --set "samples_per_frame=$((SIZE / FRAMES))")
+# SCALE_SHARD_SIZE replaces the config's 256 (the test suite runs every part on 40 pairs in shards of 4, so
+# that each of the 8 array workers has shards to commit: tests/suite/scripts.rs).
+[[ -z "${SCALE_SHARD_SIZE:-}" ]] || SETS+=(--set "shard_size=$SCALE_SHARD_SIZE")
 CONFIG="$ROOT/pipelines/paper-3dmatch-classical.toml"
 rss_mb() { awk '/Maximum resident set size/ {printf "%.0f", $6 / 1024}' "$1"; }
 build() { "$BIN" --threads "${2:-2}" build "$CONFIG" "${SETS[@]}" --out "$1" --no-progress --no-publish "${@:3}"; }

@@ -150,14 +150,16 @@ fn run_benchmark(script: &str, realdata: &Path, env: &[(&str, &str)]) -> String 
     out
 }
 
-/// `benchmarks/scale.sh`, every part, at 40 pairs: each part prints its line, and the checks it makes
-/// itself (the resumed dataset, the 8 workers into a folder and into S3) come out equal.
+/// `benchmarks/scale.sh`, every part, at 40 pairs in shards of 4: each part prints its line, and the
+/// checks it makes itself (the resumed dataset, the 8 workers into a folder and into S3) come out equal.
 #[test]
 fn the_scale_benchmark_runs_every_part() {
     let _timing = crate::support::timed();
     let dir = tempfile::tempdir().unwrap();
     let Some(realdata) = forty_redkitchen_frames(dir.path()) else { return };
-    let out = run_benchmark("scale.sh", &realdata, &[("SIZE", "400")]);
+    let out = run_benchmark("scale.sh", &realdata, &[("SIZE", "400"), ("SCALE_SHARD_SIZE", "4")]);
+    // 40 pairs in 10 shards: every one of the 8 array workers commits some (a worker left out would show).
+    assert!(out.contains("opening and resuming it (10 shards"), "{out}");
     for want in [
         "build: ",
         "resume with nothing to do: ",
