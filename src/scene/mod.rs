@@ -14,5 +14,5 @@ pub mod window;
 
 pub use config::SceneConfig;
 pub use fuse::{fuse_scene, Scene};
-pub use rules::{paste_scene, scene_keep_mask};
+pub use rules::{paste_scene, scene_keep_mask, Pasted};
 pub use window::{block_of, window_frames, HeldOut, SceneFrames};

@@ -19,18 +19,28 @@ pub fn scene_keep_mask(depth: &DepthMap, scene: &DepthMap, rule: SceneRule, fall
     (0..d.len()).map(|i| if d[i] <= 0.0 { true } else if s[i] > 0.0 { seen(i) } else { fallback[i] }).collect()
 }
 
+/// A view with the scene's depth pasted into its unknown pixels ([`paste_scene`]).
+pub struct Pasted {
+    pub depth: DepthMap,
+    /// The pixels the scene filled.
+    pub from_scene: Vec<bool>,
+    /// The pixels known now: re-projected or from the scene (what a fallback fill must keep).
+    pub known: Vec<bool>,
+}
+
 /// The scene fill of a view: every unknown pixel where the scene has a surface gets the scene's depth;
-/// known pixels stay bit for bit. Returns the view and the mask of the pixels the scene filled.
-pub fn paste_scene(depth: &DepthMap, known: &[bool], scene: &DepthMap) -> (DepthMap, Vec<bool>) {
+/// known pixels stay bit for bit.
+pub fn paste_scene(depth: &DepthMap, known: &[bool], scene: &DepthMap) -> Pasted {
     let mut out = depth.clone();
-    let mut filled = vec![false; known.len()];
+    let mut from_scene = vec![false; known.len()];
     for (i, (z, s)) in out.data_mut().iter_mut().zip(scene.data()).enumerate() {
         if !known[i] && *s > 0.0 {
             *z = *s;
-            filled[i] = true;
+            from_scene[i] = true;
         }
     }
-    (out, filled)
+    let known = known.iter().zip(&from_scene).map(|(k, s)| *k || *s).collect();
+    Pasted { depth: out, from_scene, known }
 }
 
 #[cfg(test)]
@@ -59,9 +69,10 @@ mod tests {
         let depth = DepthMap::new(4, 1, vec![1.5, 0.0, 0.0, f32::from_bits(0x3fc0_0001)]).unwrap();
         let scene = DepthMap::new(4, 1, vec![9.0, 2.0, 0.0, 9.0]).unwrap();
         let known = [true, false, false, true];
-        let (out, filled) = paste_scene(&depth, &known, &scene);
-        assert_eq!(filled, vec![false, true, false, false]);
-        assert_eq!(out.data()[..3], [1.5, 2.0, 0.0]);
-        assert_eq!(out.data()[3].to_bits(), 0x3fc0_0001, "known pixels stay bit for bit");
+        let p = paste_scene(&depth, &known, &scene);
+        assert_eq!(p.from_scene, vec![false, true, false, false]);
+        assert_eq!(p.known, vec![true, true, false, true]);
+        assert_eq!(p.depth.data()[..3], [1.5, 2.0, 0.0]);
+        assert_eq!(p.depth.data()[3].to_bits(), 0x3fc0_0001, "known pixels stay bit for bit");
     }
 }

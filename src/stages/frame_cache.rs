@@ -1,7 +1,8 @@
 //! The frames ingest prepared last, shared by its workers: a frame's samples are consecutive units, so
 //! with `samples_per_frame` > 1 its depth map is decoded, resized and back-projected once, not once per
 //! sample. Bounded: at most `capacity` frames are kept (the oldest asked for goes first). What a unit
-//! gets is the same either way: preparing a frame is deterministic.
+//! gets is the same either way: preparing a frame is deterministic. The scene stage keeps its fused scenes
+//! in one too (by block of source frames: [`super::scene`]).
 
 use crate::error::Result;
 use std::collections::VecDeque;

@@ -32,14 +32,14 @@ impl Stage<PairUnit> for Inpaint {
         // The scene's pixels join the known ones: the fallback fills around them and keeps them bit for bit.
         let mut pasted = Vec::new();
         for u in units.iter_mut() {
-            if let (true, Some(scene)) = (self.scene, &u.scene_depth) {
-                let (depth, filled) = paste_scene(u.condition.as_ref().expect("reproject sets the condition"), &u.known, scene);
-                let known = u.known.iter().zip(&filled).map(|(k, f)| *k || *f).collect::<Vec<bool>>();
-                pasted.push(Some((depth, known)));
-                u.scene_filled = filled;
-            } else {
-                pasted.push(None);
-            }
+            pasted.push(match (self.scene, &u.scene_depth) {
+                (true, Some(scene)) => {
+                    let p = paste_scene(u.condition.as_ref().expect("reproject sets the condition"), &u.known, scene);
+                    u.scene_filled = p.from_scene.clone();
+                    Some(p)
+                }
+                _ => None,
+            });
         }
         let contexts: Vec<InpaintContext> = units
             .iter()
@@ -54,7 +54,7 @@ impl Stage<PairUnit> for Inpaint {
             .zip(&contexts)
             .zip(&pasted)
             .map(|((u, ctx), p)| match p {
-                Some((depth, known)) => (depth, known.as_slice(), ctx),
+                Some(p) => (&p.depth, p.known.as_slice(), ctx),
                 None => (u.condition.as_ref().expect("reproject sets the condition"), u.known.as_slice(), ctx),
             })
             .collect();

@@ -111,9 +111,8 @@ impl NamedFill {
     fn fill(&self, condition: &DepthMap, known: &[bool], scene: Option<&DepthMap>, ctx: &InpaintContext) -> (DepthMap, Vec<bool>) {
         match (self.scene, scene) {
             (true, Some(scene)) => {
-                let (pasted, from_scene) = paste_scene(condition, known, scene);
-                let with_scene: Vec<bool> = known.iter().zip(&from_scene).map(|(k, s)| *k || *s).collect();
-                (self.inpainter.inpaint(&pasted, &with_scene, ctx), from_scene)
+                let p = paste_scene(condition, known, scene);
+                (self.inpainter.inpaint(&p.depth, &p.known, ctx), p.from_scene)
             }
             _ => (self.inpainter.inpaint(condition, known, ctx), Vec::new()),
         }
@@ -247,8 +246,8 @@ pub fn dump_views(dir: &Path, views: &[View], corrections: &[NamedCorrector], ra
             write("known", encode_npy_mask(w, h, &known))?;
             write("captured", encode_npy_image_f32(w, h, v.captured.data()))?;
             if let Some(scene) = &v.scene {
-                let (pasted, from_scene) = paste_scene(&condition, &known, scene);
-                let at_unknown: Vec<f32> = pasted.data().iter().zip(&from_scene).map(|(z, s)| if *s { *z } else { 0.0 }).collect();
+                let p = paste_scene(&condition, &known, scene);
+                let at_unknown: Vec<f32> = p.depth.data().iter().zip(&p.from_scene).map(|(z, s)| if *s { *z } else { 0.0 }).collect();
                 write("scene", encode_npy_image_f32(w, h, &at_unknown))?;
             }
             let k = &v.intrinsics;
