@@ -56,8 +56,12 @@ test-deps: venv
 real-data:
 	$(BASE_PYTHON) scripts/fetch-realdata.py --dest "$(REALDATA_CACHE)"
 
+# The integration tests are one binary (tests/suite); 3 test threads on 2 cores overlap the tests that wait
+# on their servers (Azurite, moto, Slurm) with the ones that compute. Each run prints its slowest tests and
+# writes every test's time to target/tmp/suite-times.tsv.
+TEST_THREADS ?= 3
 test: libtorch test-deps $(REAL_DATA_FETCH)
-	$(CARGO) test --release
+	$(CARGO) test --release -- --test-threads=$(TEST_THREADS)
 
 bench-deps: venv
 	./scripts/install-bench-peers.sh

@@ -17,7 +17,7 @@ use std::process::{Command, Output, Stdio};
 use std::sync::MutexGuard;
 use std::time::{Duration, Instant};
 use crate::support::azure::Azurite;
-use crate::support::store::ENV;
+use crate::support::azure::ENV;
 use crate::support::{bin, digests, python, synthetic_config};
 
 /// One test's Azure world: an Azurite with one container, a temporary folder, and the lock of the

@@ -479,7 +479,7 @@ fn on_s3_the_table_reads_as_query_does_and_repair_withdraws_the_corrupted_shard(
 #[test]
 fn on_azure_the_table_reads_as_query_does_and_repair_withdraws_the_corrupted_shard() {
     let _timing = crate::support::timed();
-    let _env = ENV.lock().unwrap_or_else(|e| e.into_inner());
+    let _env = crate::support::azure::ENV.lock().unwrap_or_else(|e| e.into_inner());
     let az = Azurite::start();
     az.set_env();
     let env = azure(&az.endpoint());

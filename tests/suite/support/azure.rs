@@ -10,6 +10,10 @@ use std::process::{Child, Command, Stdio};
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
+/// Serialises the tests that point this process's `AZURE_*` variables at their own Azurite (the `AWS_*`
+/// ones have their own lock, `store::ENV`: an Azure test and an S3 test may run side by side).
+pub static ENV: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 /// A running Azurite blob service.
 pub struct Azurite {
     child: Child,
@@ -122,7 +126,7 @@ impl Azurite {
         cmd.envs(Azurite::vars(endpoint))
     }
 
-    /// The same for this test process (hold [`super::store::ENV`] while doing so).
+    /// The same for this test process (hold [`ENV`] while doing so).
     pub fn set_env(&self) {
         for (k, _) in std::env::vars_os() {
             if k.to_string_lossy().starts_with("AZURE_") {
