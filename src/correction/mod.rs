@@ -51,3 +51,11 @@ pub fn apply_keep_mask(depth: &mut DepthMap, known: &mut [bool], keep: &[bool]) 
     }
     dropped
 }
+
+/// The correction label (paper §3.3): `M_gt[p] = |I_s[p] − I_d[p]| < τ_gt`, with empty pixels as 0 (the official formula): a pixel empty in
+/// both is kept; a sparse depth where the dense map is empty, or more than τ_gt off, is dropped.
+/// `true` = keep.
+pub fn keep_label(sparse: &DepthMap, dense: &DepthMap, tau_gt: f32) -> Vec<bool> {
+    assert_eq!(sparse.data().len(), dense.data().len(), "label maps differ in size");
+    sparse.data().iter().zip(dense.data()).map(|(&s, &d)| (s - d).abs() < tau_gt).collect()
+}

@@ -251,11 +251,10 @@ fn centroid_of(points: &[Point], run: &[u32]) -> Point {
     centroid(sum, run.len() as u32)
 }
 
-/// Where a point of a generated target came from. For a raw point: `known` is 1 when it was re-projected
-/// from the source frame, `scene` is 1 when the scene (the posed frames around the source) gave it, both
-/// 0 when a fill made it up; `view` the target view it belongs to (0 = the pair's first). After
-/// [`voxel_downsample_tagged`]: `known` and `scene` are the shares of the voxel's points of each kind,
-/// `view` the lowest view among them.
+/// Where a point of a generated target came from. Raw: `known` 1 when re-projected from the source frame,
+/// `scene` 1 when the scene (posed frames around the source) gave it, both 0 when a fill made it up; `view`
+/// its target view (0 = the pair's first). After [`voxel_downsample_tagged`]: the shares of the voxel's
+/// points of each kind, and the lowest view among them.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PointTag {
     pub known: f32,

@@ -1,8 +1,9 @@
 //! The labelling algorithm of the correction network's training data (paper §3.3, reference §4.2), as pure
 //! functions: fuse a window of frames into the reference camera ([`fuse_window`]), then for a target pose
-//! render the dense and sparse re-projections and label them ([`label_view`], [`keep_label`]).
+//! render the dense and sparse re-projections and label them ([`label_view`], [`crate::correction::keep_label`]).
 
 use super::config::{DenseMode, LabelsConfig};
+use crate::correction::keep_label;
 use crate::error::{Error, Result};
 use crate::geometry::{project_zbuffer, relative_pose, voxel_downsample, DepthMap, Intrinsics, Point};
 use crate::sources::Frame;
@@ -68,14 +69,6 @@ pub fn label_view(window: &FusedWindow, t_target_from_reference: &Isometry3<f64>
     let sparse = project_zbuffer(&window.sparse, t_target_from_reference, k, false).depth;
     let keep = keep_label(&sparse, &dense, tau_gt);
     Ok(LabelledView { sparse, dense, keep })
-}
-
-/// `M_gt[p] = |I_s[p] − I_d[p]| < τ_gt`, with empty pixels as 0 (the official formula): a pixel empty in
-/// both is kept; a sparse depth where the dense map is empty, or more than τ_gt off, is dropped.
-/// `true` = keep.
-pub fn keep_label(sparse: &DepthMap, dense: &DepthMap, tau_gt: f32) -> Vec<bool> {
-    assert_eq!(sparse.data().len(), dense.data().len(), "label maps differ in size");
-    sparse.data().iter().zip(dense.data()).map(|(&s, &d)| (s - d).abs() < tau_gt).collect()
 }
 
 /// `primary` with its empty pixels taken from `fallback`.

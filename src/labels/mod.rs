@@ -12,5 +12,4 @@ pub mod stages;
 pub mod windows;
 
 pub use config::LabelsConfig;
-pub use label::keep_label;
 pub use run::{run_labels, LabelsReport};

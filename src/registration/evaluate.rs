@@ -99,6 +99,17 @@ fn draws(config: &EvalConfig, pair: &BenchPair, n_source: usize, n_target: usize
     (si, ti, rng.fork(2).next_u64())
 }
 
+/// A random order of `0..n` (a full Fisher–Yates; [`sample_indices`] keeps the identity order when asked
+/// for all `n`).
+pub fn permutation(n: usize, rng: &mut Rng) -> Vec<usize> {
+    let mut idx: Vec<usize> = (0..n).collect();
+    for a in 0..n.saturating_sub(1) {
+        let b = a + rng.below((n - a) as u64) as usize;
+        idx.swap(a, b);
+    }
+    idx
+}
+
 /// `k` distinct indices below `n` (all of them, in order, when `k ≥ n`), drawn by a partial Fisher–Yates.
 pub fn sample_indices(n: usize, k: usize, rng: &mut Rng) -> Vec<usize> {
     if k >= n {
@@ -216,5 +227,26 @@ fn score_pair(
         registered: error <= RR_ERROR,
         rre_deg: rre,
         rte_m: rte,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn permutation_orders_every_index_once_and_at_random() {
+        let p = permutation(1000, &mut Rng::new(7));
+        let mut sorted = p.clone();
+        sorted.sort_unstable();
+        assert_eq!(sorted, (0..1000).collect::<Vec<_>>(), "each index once");
+        // A random order leaves about one index in place; the identity (what sample_indices(n, n) gives) all.
+        assert!(p.iter().enumerate().filter(|(i, v)| i == *v).count() < 10);
+        assert_ne!(p, permutation(1000, &mut Rng::new(8)), "another seed, another order");
+        assert_eq!(p, permutation(1000, &mut Rng::new(7)), "the seed fixes the order");
+        // Each index lands in the first half about half the time over seeds (a biased shuffle would not).
+        let first_half = (0..400u64).filter(|&s| permutation(10, &mut Rng::new(s))[..5].contains(&9)).count();
+        assert!((160..240).contains(&first_half), "{first_half}");
+        assert!(permutation(0, &mut Rng::new(1)).is_empty() && permutation(1, &mut Rng::new(1)) == [0]);
     }
 }

@@ -1,9 +1,8 @@
 //! What a scene decides about a target view, as pure functions: which re-projected pixels penetrate a
 //! surface (the correction labels' rule), and which unknown pixels it fills.
 
-use crate::correction::SceneRule;
 use crate::geometry::DepthMap;
-use crate::labels::label::keep_label;
+use crate::correction::{keep_label, SceneRule};
 
 /// The keep mask of `depth` against the scene's depth `scene` seen from the same camera: where the scene
 /// has a surface, the rule that makes the correction labels (keep when `|depth − scene| < margin`: a pixel

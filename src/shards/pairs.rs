@@ -2,6 +2,8 @@
 //! version-2 batches are read too (through [`super::pairs_versions::to_current`]).
 //!
 //! Unsigned row fields are stored in signed columns bit for bit (`seed as i64`); reading casts back.
+//! Over 400 lines because the writer and the reader of the schema stay side by side: a column added to
+//! one is seen next to the other.
 
 use super::pairs_versions::to_current;
 use super::row::{PairRow, StageTiming, Status};

@@ -49,11 +49,15 @@ fn upgrade(batch: &RecordBatch, version: &str) -> Result<RecordBatch> {
                         let values: ArrayRef = if name == "target_view" { Arc::new(Int8Array::from(Vec::<i8>::new())) } else { Arc::new(Float32Array::from(Vec::<f32>::new())) };
                         Arc::new(ListArray::new(list_item(f.data_type()), OffsetBuffer::new_zeroed(n), values, None))
                     }
-                    // No scene: every point's scene share is 0, one per point of the known shares (none in version 1).
+                    // No scene: every point's scene share is 0, one per point of the known shares (version 1
+                    // has none: empty lists, as its other provenance).
                     "target_scene_share" => {
-                        let known = downcast::<ListArray>("target_known_share", column(batch, "target_known_share")?)?;
-                        let zeros = Float32Array::from(vec![0.0f32; known.values().len()]);
-                        Arc::new(ListArray::new(list_item(f.data_type()), known.offsets().clone(), Arc::new(zeros), None))
+                        let offsets = match batch.column_by_name("target_known_share") {
+                            Some(c) => downcast::<ListArray>("target_known_share", c)?.offsets().clone(),
+                            None => OffsetBuffer::new_zeroed(n),
+                        };
+                        let zeros = Float32Array::from(vec![0.0f32; *offsets.last().unwrap_or(&0) as usize]);
+                        Arc::new(ListArray::new(list_item(f.data_type()), offsets, Arc::new(zeros), None))
                     }
                     "scene_frames" => Arc::new(Int32Array::from(vec![0i32; n])),
                     _ => return Err(Error::Parquet(format!("{version}: column `{name}` is missing"))),

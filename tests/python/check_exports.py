@@ -8,8 +8,8 @@ plan.json: {"pointreggpt": dir, "geotransformer": dir (default .pth clouds), "ge
             "exported": [pair keys the training formats hold, in order], "ply_exported": [pair keys in the ply export]}
 
 Checks: PLY clouds (a small numpy PLY parser) and the target clouds' per-point provenance (vertex properties
-`known_share`/`view` in the PLY formats, `.known_share.npy`/`.view.npy` in GeoTransformer's) against the
-`target_known_share`/`target_view` columns, poses and intrinsics (np.loadtxt), gt.log lines (format and
+`known_share`/`scene_share`/`view` in the PLY formats, `.known_share`/`.scene_share`/`.view` files in
+GeoTransformer's) against the `target_known_share`/`target_scene_share`/`target_view` columns, poses and intrinsics (np.loadtxt), gt.log lines (format and
 the official keep rule), the GeoTransformer export as GeoTransformer's own loader reads it (pickle.load of
 metadata/train.pkl, numpy arrays, warnings as errors; then torch.load(osp.join(data_root, pcd),
 weights_only=False) of each .pth cloud: a zip archive laid out as torch.save's, compared record by record
@@ -66,24 +66,28 @@ def read_ply_vertices(path):
 
 
 def check_provenance(vertices, r, key):
-    """The PLY vertex properties known_share and view equal the row's provenance columns."""
-    assert vertices.dtype.names == ("x", "y", "z", "known_share", "view"), f"{key}: target PLY properties {vertices.dtype.names}"
+    """The PLY vertex properties known_share, scene_share and view equal the row's provenance columns."""
+    names = ("x", "y", "z", "known_share", "scene_share", "view")
+    assert vertices.dtype.names == names, f"{key}: target PLY properties {vertices.dtype.names}"
     assert np.array_equal(vertices["known_share"], r["known_share"]), f"{key}: known_share"
+    assert np.array_equal(vertices["scene_share"], r["scene_share"]), f"{key}: scene_share"
     assert np.array_equal(vertices["view"].astype(np.int8), r["view"]), f"{key}: view"
 
 
 def load_rows(root):
     rows = {}
     cols = ["pair_key", "unit_index", "scene", "status", "source_points", "target_points", "t_target_from_source",
-            "overlap_source", "overlap_target", "source_intrinsics", "target_known_share", "target_view"]
+            "overlap_source", "overlap_target", "source_intrinsics", "target_known_share", "target_scene_share", "target_view"]
     for path in committed_shards(root):
         t = pq.read_table(path, columns=cols)
         for i in range(t.num_rows):
             r = {c: t.column(c)[i].as_py() for c in cols if not c.endswith("_points") and not c.startswith("target_")}
             r["source"], r["target"] = points(t.column("source_points"), i), points(t.column("target_points"), i)
             r["known_share"] = np.asarray(t.column("target_known_share")[i].as_py(), dtype=np.float32)
+            r["scene_share"] = np.asarray(t.column("target_scene_share")[i].as_py(), dtype=np.float32)
             r["view"] = np.asarray(t.column("target_view")[i].as_py(), dtype=np.int8)
-            assert len(r["known_share"]) == len(r["view"]) == len(r["target"]), f"{r['pair_key']}: provenance lengths"
+            n = len(r["target"])
+            assert len(r["known_share"]) == len(r["scene_share"]) == len(r["view"]) == n, f"{r['pair_key']}: provenance lengths"
             r["T"] = np.asarray(r["t_target_from_source"], dtype=np.float64).reshape(4, 4)
             rows[r["pair_key"]] = r
     return rows
@@ -217,7 +221,7 @@ def check_geotransformer(root, rows, keys, loader="pth", tmp=None):
         with open(os.path.join(metadata_root, "train.pkl"), "rb") as f:
             meta = pickle.load(f)
     assert isinstance(meta, list) and len(meta) == len(keys), f"{len(meta)} entries, expected {len(keys)}"
-    want_keys = {"scene_name", "frag_id0", "frag_id1", "overlap", "pcd0", "pcd1", "rotation", "translation", "pcd0_known_share", "pcd0_view"}
+    want_keys = {"scene_name", "frag_id0", "frag_id1", "overlap", "pcd0", "pcd1", "rotation", "translation", "pcd0_known_share", "pcd0_scene_share", "pcd0_view"}
     ext = "." + loader
 
     def load(rel):
@@ -244,9 +248,11 @@ def check_geotransformer(root, rows, keys, loader="pth", tmp=None):
             assert type(cloud) is np.ndarray and cloud.dtype == np.float32 and cloud.ndim == 2 and cloud.shape[1] == 3 and cloud.flags["C_CONTIGUOUS"]
         assert ref.tobytes() == r["target"].tobytes() and ref.shape == r["target"].shape, f"{key}: target cloud (pcd0) bits"
         assert src.tobytes() == r["source"].tobytes() and src.shape == r["source"].shape, f"{key}: source cloud (pcd1) bits"
-        known, view = load(e["pcd0_known_share"]), load(e["pcd0_view"])
-        assert known.dtype == np.float32 and view.dtype == np.int8 and known.shape == view.shape == (len(ref),), (known.dtype, view.dtype)
-        assert np.array_equal(known, r["known_share"]) and np.array_equal(view, r["view"]), f"{key}: provenance"
+        known, scene, view = load(e["pcd0_known_share"]), load(e["pcd0_scene_share"]), load(e["pcd0_view"])
+        assert known.dtype == scene.dtype == np.float32 and view.dtype == np.int8, (known.dtype, scene.dtype, view.dtype)
+        assert known.shape == scene.shape == view.shape == (len(ref),), (known.shape, scene.shape, view.shape)
+        assert np.array_equal(known, r["known_share"]) and np.array_equal(scene, r["scene_share"]), f"{key}: provenance shares"
+        assert np.array_equal(view, r["view"]), f"{key}: provenance view"
         if loader == "pth" and k < 2:
             for rel, array in ((e["pcd0"], ref), (e["pcd0_view"], view)):
                 module = compare_with_torch_save(os.path.join(data_root, rel), array, torch, tmp)

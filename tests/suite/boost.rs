@@ -536,3 +536,26 @@ fn several_sequences_tables_by_scene_and_compare() {
     assert!(!paired.lines().any(|l| l.contains(",C2,C1,")), "a C2 - C1 row without --compare:\n{paired}");
     check_table_against_scores(&out, &[("C0", vec!["C0"]), ("C1", vec!["C1/seed-0"]), ("C2", vec!["C2/seed-0"]), ("C3", vec!["C3/seed-0"])], &[("C3", "C2"), ("C1", "C0")]);
 }
+
+/// The posed-input configs the README recommends are the generators `eval boost` measured: the shipped
+/// classical config with the generator's overrides, every frame a source, 4 views each.
+#[test]
+fn the_shipped_nofill_and_scene_configs_are_the_generators_eval_boost_measures() {
+    let _timing = crate::support::timed();
+    use pointreggpt::pipeline::config::BuildConfig;
+    use pointreggpt::pipeline::load::load_toml;
+    use pointreggpt::training::boost::conditions::{Generator, GeneratorKind};
+    let pipelines = Path::new(env!("CARGO_MANIFEST_DIR")).join("pipelines");
+    let generator = |kind| -> BuildConfig {
+        let mut sets: Vec<String> =
+            Generator { kind, lo: false }.overrides(Path::new("models")).into_iter().map(|(k, v)| format!("{k}={v}")).collect();
+        sets.extend(["select.every=1".to_string(), "samples_per_frame=4".to_string()]);
+        load_toml(&pipelines.join("paper-3dmatch-classical.toml"), &sets).unwrap()
+    };
+    let shipped = |name: &str| -> BuildConfig { load_toml(&pipelines.join(name), &[]).unwrap() };
+    assert_eq!(shipped("paper-3dmatch-nofill.toml"), generator(GeneratorKind::NoFill));
+    assert_eq!(shipped("paper-3dmatch-scene.toml"), generator(GeneratorKind::Scene));
+    // The comparison can fail: the classical generator (its background fill) is neither.
+    assert_ne!(shipped("paper-3dmatch-nofill.toml"), generator(GeneratorKind::Classical));
+    assert_ne!(shipped("paper-3dmatch-scene.toml"), generator(GeneratorKind::NoFill));
+}

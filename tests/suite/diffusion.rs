@@ -583,14 +583,16 @@ fn fill_scores(real: &Path, checkpoint: &str, steps: usize, start_step: usize, d
     let (steps, start) = (steps.to_string(), start_step.to_string());
     let args = ["--max-views", "4", "--steps", &steps, "--start-step", &start, "--eta", "0", "--diffusion", checkpoint];
     let text = eval_inpaint(real, &csv, &args);
+    let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap_or_else(|| panic!("no column {name}: {header:?}"));
+    let (abs_rel, rmse, delta) = (col("fill_abs_rel"), col("fill_rmse_m"), col("fill_delta_1_25"));
     text.lines()
         .skip(1)
         .map(|l| l.split(',').collect::<Vec<_>>())
         .filter(|r| ["push_pull", "background"].contains(&r[1]) || r[1].contains("/pp"))
         .map(|r| {
             let fill = if r[1].contains("/pp") { "diffusion" } else { r[1] };
-            // Columns fill_abs_rel, fill_rmse_m, fill_delta_1_25.
-            let f = Fill { abs_rel: r[8].parse().unwrap(), rmse: r[9].parse().unwrap(), delta: r[10].parse().unwrap() };
+            let f = Fill { abs_rel: r[abs_rel].parse().unwrap(), rmse: r[rmse].parse().unwrap(), delta: r[delta].parse().unwrap() };
             ((r[0].to_string(), fill.to_string()), f)
         })
         .collect()
@@ -707,7 +709,7 @@ fn shipped_pipeline(name: &str) -> pointreggpt::Result<BuildConfig> {
 #[test]
 fn the_shipped_pipelines_validate_and_the_paper_one_names_its_missing_models() {
     let _timing = crate::support::timed();
-    for name in ["demo.toml", "paper-3dmatch-classical.toml"] {
+    for name in ["demo.toml", "paper-3dmatch-classical.toml", "paper-3dmatch-nofill.toml", "paper-3dmatch-scene.toml"] {
         shipped_pipeline(name).and_then(|c| c.validate()).unwrap_or_else(|e| panic!("{name}: {e}"));
     }
     let err = shipped_pipeline("paper-3dmatch.toml").and_then(|c| c.validate()).unwrap_err().to_string();

@@ -17,8 +17,10 @@ type ModPath = Vec<String>;
 const MAX_LINES: usize = 400;
 
 /// Top-level modules the build's inference path is made of, and those they may never import.
-const INFERENCE: [&str; 13] =
-    ["atomic", "geometry", "rng", "runtime", "shards", "sources", "tsdf", "nn", "correction", "diffusion", "inpainting", "stages", "registration"];
+const INFERENCE: [&str; 14] = [
+    "atomic", "geometry", "rng", "runtime", "shards", "sources", "tsdf", "nn", "correction", "diffusion", "inpainting", "scene", "stages",
+    "registration",
+];
 const ABOVE_INFERENCE: [&str; 7] = ["training", "commands", "cli", "export", "preview", "query", "labels"];
 
 fn src_dir() -> PathBuf {

@@ -18,10 +18,24 @@ fn text(o: &Output) -> (String, String) {
 #[test]
 fn the_tests_run_python_from_the_projects_virtual_environment() {
     let _timing = crate::support::timed();
-    let venv = Path::new(ROOT).join(".venv");
-    assert_eq!(support::python_for(None, None), venv.join("bin/python").to_string_lossy(), "PYTHON unset");
-    assert_eq!(support::python_for(Some("".into()), None), venv.join("bin/python").to_string_lossy(), "PYTHON empty");
-    assert_eq!(support::python_for(Some("/x/bin/python".into()), None), "/x/bin/python", "PYTHON wins");
+    // An environment of our own (CI keeps its own outside the clone, so the checkout's .venv may not exist).
+    let dir = tempfile::tempdir().unwrap();
+    let venv = dir.path().join("venv");
+    std::fs::create_dir_all(venv.join("bin")).unwrap();
+    std::fs::write(venv.join("bin/python"), "").unwrap();
+    let v = || Some(venv.clone().into_os_string());
+    assert_eq!(support::python_for(None, v()), venv.join("bin/python").to_string_lossy(), "PYTHON unset");
+    assert_eq!(support::python_for(Some("".into()), v()), venv.join("bin/python").to_string_lossy(), "PYTHON empty");
+    assert_eq!(support::python_for(Some("/x/bin/python".into()), v()), "/x/bin/python", "PYTHON wins");
+    // Without POINTREGGPT_VENV: the checkout's .venv, or a stop naming it.
+    let checkout = Path::new(ROOT).join(".venv/bin/python");
+    match std::panic::catch_unwind(|| support::python_for(None, None)) {
+        Ok(p) => assert_eq!(p, checkout.to_string_lossy(), "POINTREGGPT_VENV unset"),
+        Err(e) => {
+            let message = e.downcast_ref::<String>().cloned().unwrap_or_default();
+            assert!(!checkout.is_file() && message.contains(&*checkout.to_string_lossy()), "{message}");
+        }
+    }
     let missing = std::panic::catch_unwind(|| support::python_for(None, Some("/nonexistent/venv".into())));
     let message = missing.expect_err("a missing environment must stop the test run");
     let message = message.downcast_ref::<String>().cloned().unwrap_or_default();

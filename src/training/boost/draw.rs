@@ -6,7 +6,7 @@ use super::data::{fragment_pairs, generated_pairs, generator_config, open_one, r
 use super::histogram::{histogram, match_histogram, EDGES};
 use super::config::{BoostConfig, TrainingSequence};
 use crate::error::Result;
-use crate::registration::evaluate::sample_indices;
+use crate::registration::evaluate::permutation;
 use crate::rng::Rng;
 use std::collections::{BTreeMap, BTreeSet};
 
@@ -173,12 +173,12 @@ pub fn draw(cfg: &BoostConfig, pools: &Pools, d: u64, notes: &mut Vec<String>) -
         }
         let common: Vec<u64> = common.unwrap_or_default().into_iter().collect();
         let rng = for_draw(Rng::new(*seed).fork(0x6E), d);
-        let shared: Vec<u64> = sample_indices(common.len(), common.len(), &mut rng.fork(0)).into_iter().map(|i| common[i]).collect();
+        let shared: Vec<u64> = permutation(common.len(), &mut rng.fork(0)).into_iter().map(|i| common[i]).collect();
         for (&g, (pairs, _)) in &pools.generated {
             let at: BTreeMap<u64, usize> = pairs.iter().enumerate().filter_map(|(i, p)| p.unit.map(|u| (u, i))).collect();
             let mut order: Vec<usize> = shared.iter().map(|u| at[u]).collect();
             let rest: Vec<usize> = (0..pairs.len()).filter(|i| pairs[*i].unit.is_none_or(|u| !common.binary_search(&u).is_ok())).collect();
-            order.extend(sample_indices(rest.len(), rest.len(), &mut rng.fork(1 + 2 * g.kind as u64 + g.lo as u64)).into_iter().map(|k| rest[k]));
+            order.extend(permutation(rest.len(), &mut rng.fork(1 + 2 * g.kind as u64 + g.lo as u64)).into_iter().map(|k| rest[k]));
             notes.push(format!("{}{tag}: {} generated pairs, {} of their units in every generator's pool", g.name(), pairs.len(), common.len()));
             generated.insert(g, order);
         }
@@ -200,13 +200,13 @@ pub fn draw(cfg: &BoostConfig, pools: &Pools, d: u64, notes: &mut Vec<String>) -
             if m.complete { String::new() } else { format!(" (fewer than --pairs {}: the scarcest bin allows no more at this histogram)", cfg.pairs) }
         ));
         let mut idx = m.indices;
-        let perm = sample_indices(idx.len(), idx.len(), &mut for_draw(Rng::new(cfg.classical.seed).fork(78), d));
+        let perm = permutation(idx.len(), &mut for_draw(Rng::new(cfg.classical.seed).fork(78), d));
         idx = perm.into_iter().map(|k| idx[k]).collect();
         single = idx;
     }
     let mut fragments = Vec::new();
     if let Some(f) = &pools.fragments {
-        fragments = sample_indices(f.len(), f.len(), &mut for_draw(Rng::new(cfg.classical.seed).fork(79), d));
+        fragments = permutation(f.len(), &mut for_draw(Rng::new(cfg.classical.seed).fork(79), d));
         let lo = f.iter().filter(|p| p.overlap <= 0.3).count();
         notes.push(format!("fragments{tag}: {} real fragment pairs ({} at 10-30 % overlap, {} above)", f.len(), lo, f.len() - lo));
     }
