@@ -51,6 +51,14 @@ TMP="$(mktemp)"
     echo "(benchmark scale failed)"
   fi
   echo '```'
+  echo
+  echo "## training loaders (\`benchmarks/loader.sh\`, SIZE=${SCALE_SIZE:-20000})"
+  echo
+  echo '```'
+  if ! SIZE="${SCALE_SIZE:-20000}" ./benchmarks/loader.sh 2>&1; then
+    echo "(benchmark loader failed)"
+  fi
+  echo '```'
 } > "$TMP"
 mv "$TMP" "$OUT"
 echo "wrote $OUT"
